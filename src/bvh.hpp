@@ -1,0 +1,48 @@
+// Flat bounding volume hierarchy over a triangle mesh: the data, shared by the builder
+// (bvh_build.cpp) and the traversal (traverse.hpp).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "geometry.hpp"
+
+namespace vrc {
+
+/// One node, 32 bytes. Inner nodes have `count == 0` and their two children at
+/// `index` and `index + 1`; leaves hold triangles `index .. index + count - 1`.
+struct Node {
+    Box box;
+    uint32_t index;
+    uint32_t count;
+    [[nodiscard]] bool is_leaf() const { return count != 0; }
+};
+static_assert(sizeof(Node) == 32, "nodes are meant to be 32 bytes");
+
+/// Triangles, in BVH leaf order, and the hierarchy over them. Owns copies of its input so
+/// that a mesh modified after (or during) a cast cannot change a result.
+struct Scene {
+    std::vector<double> points;       ///< (n_points, 3) world coordinates
+    std::vector<uint32_t> triangles;  ///< (n_triangles, 3) point indices, in leaf order
+    std::vector<uint32_t> prim_ids;   ///< leaf-order position -> input triangle index
+    std::vector<Node> nodes;          ///< nodes[0] is the root; empty when there are no triangles
+    Box bounds;                       ///< box of all triangles (rounded outward)
+
+    [[nodiscard]] std::size_t n_triangles() const { return prim_ids.size(); }
+    [[nodiscard]] const double* point(uint32_t i) const { return points.data() + 3 * std::size_t(i); }
+    /// Bytes held by the structure and the per-triangle data (points included).
+    [[nodiscard]] std::size_t memory_bytes() const {
+        return points.size() * sizeof(double) + triangles.size() * sizeof(uint32_t) +
+               prim_ids.size() * sizeof(uint32_t) + nodes.size() * sizeof(Node);
+    }
+};
+
+/// Builds a scene with the binned surface area heuristic (Wald 2007, "On fast
+/// construction of SAH-based bounding volume hierarchies"), subtrees built in parallel on
+/// up to `threads` threads. `points` is (n_points, 3), `triangles` (n_triangles, 3) with
+/// indices already checked to be < n_points.
+[[nodiscard]] Scene build_scene(const double* points, std::size_t n_points, const uint32_t* triangles,
+                                std::size_t n_triangles, unsigned threads);
+
+}  // namespace vrc

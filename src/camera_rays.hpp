@@ -1,0 +1,104 @@
+// Camera rays (the seed lecture's model) and rays given as arrays, behind one interface
+// the tile renderer iterates over.
+#pragma once
+
+#include <cstddef>
+#include <algorithm>
+#include <cstdint>
+
+#include "geometry.hpp"
+
+namespace vrc {
+
+/// Camera in world space: eye, orthonormal right (u), up (v) and backward (w) axes, the
+/// image window w x h at distance d, nx x ny pixels, and the depth range [near, far].
+struct CameraSpec {
+    double eye[3], u[3], v[3], w[3];
+    double d, width, height, near, far;
+    int64_t nx, ny;
+    bool parallel;
+};
+
+/// One ray per pixel. Pixel (i, r) is output element i + r nx, row r = 0 at the bottom
+/// (VTK image order); its centre is the seed's formula with j = ny - 1 - r counted from
+/// the top: x = -w/2 + w/nx (i + 1/2), y = h/2 - h/ny (j + 1/2), z = -d.
+/// Perspective rays start at the eye with direction P_ij, so t = 1 is the image plane and
+/// depth = t d. Parallel rays start at (x, y, 0) with direction (0, 0, -1): depth = t.
+class CameraRays {
+   public:
+    explicit CameraRays(const CameraSpec& c) : c_(c) {}
+    [[nodiscard]] std::size_t size() const { return std::size_t(c_.nx) * std::size_t(c_.ny); }
+
+    [[nodiscard]] Ray ray(std::size_t pixel) const {
+        const int64_t i = int64_t(pixel % std::size_t(c_.nx)), r = int64_t(pixel / std::size_t(c_.nx));
+        const int64_t j = c_.ny - 1 - r;
+        const double x = -c_.width * 0.5 + c_.width / double(c_.nx) * (double(i) + 0.5);
+        const double y = c_.height * 0.5 - c_.height / double(c_.ny) * (double(j) + 0.5);
+        Ray ray;
+        if (c_.parallel) {
+            for (int k = 0; k < 3; ++k) {
+                ray.org[k] = c_.eye[k] + x * c_.u[k] + y * c_.v[k];
+                ray.dir[k] = -c_.w[k];
+            }
+            ray.tmin = c_.near;
+            ray.tmax = c_.far;
+        } else {
+            for (int k = 0; k < 3; ++k) {
+                ray.org[k] = c_.eye[k];
+                ray.dir[k] = x * c_.u[k] + y * c_.v[k] - c_.d * c_.w[k];
+            }
+            ray.tmin = c_.near / c_.d;
+            ray.tmax = c_.far / c_.d;
+        }
+        return ray;
+    }
+    /// Depth along the viewing direction of a hit at parameter t.
+    [[nodiscard]] double depth(double t) const { return c_.parallel ? t : t * c_.d; }
+
+    /// Square tiles of kTile x kTile pixels: neighbouring rays traverse the same nodes.
+    static constexpr int64_t kTile = 16;
+    [[nodiscard]] std::size_t n_tiles() const { return std::size_t(tiles_x() * ((c_.ny + kTile - 1) / kTile)); }
+    template <class F>
+    void for_each_in_tile(std::size_t tile, F&& f) const {
+        const int64_t i0 = int64_t(tile) % tiles_x() * kTile, r0 = int64_t(tile) / tiles_x() * kTile;
+        for (int64_t r = r0; r < std::min(r0 + kTile, c_.ny); ++r)
+            for (int64_t i = i0; i < std::min(i0 + kTile, c_.nx); ++i) f(std::size_t(i + r * c_.nx));
+    }
+
+   private:
+    [[nodiscard]] int64_t tiles_x() const { return (c_.nx + kTile - 1) / kTile; }
+    CameraSpec c_;
+};
+
+/// Rays from (n, 3) origin and direction arrays; depth is the ray parameter t.
+class ArrayRays {
+   public:
+    ArrayRays(const double* origins, const double* directions, std::size_t n, double tmin, double tmax)
+        : o_(origins), d_(directions), n_(n), tmin_(tmin), tmax_(tmax) {}
+    [[nodiscard]] std::size_t size() const { return n_; }
+    [[nodiscard]] Ray ray(std::size_t k) const {
+        Ray ray;
+        for (int a = 0; a < 3; ++a) {
+            ray.org[a] = o_[3 * k + a];
+            ray.dir[a] = d_[3 * k + a];
+        }
+        ray.tmin = tmin_;
+        ray.tmax = tmax_;
+        return ray;
+    }
+    [[nodiscard]] double depth(double t) const { return t; }
+
+    static constexpr std::size_t kChunk = 1024;
+    [[nodiscard]] std::size_t n_tiles() const { return (n_ + kChunk - 1) / kChunk; }
+    template <class F>
+    void for_each_in_tile(std::size_t tile, F&& f) const {
+        for (std::size_t k = tile * kChunk; k < std::min(n_, (tile + 1) * kChunk); ++k) f(k);
+    }
+
+   private:
+    const double *o_, *d_;
+    std::size_t n_;
+    double tmin_, tmax_;
+};
+
+}  // namespace vrc

@@ -1,0 +1,68 @@
+// Small value types shared by the builder, the traversal and the kernels.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+namespace vrc {
+
+/// Axis-aligned box in single precision. Stored boxes are rounded outward, so a box
+/// always contains the double-precision triangles it bounds.
+struct Box {
+    float lo[3] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
+                   std::numeric_limits<float>::infinity()};
+    float hi[3] = {-std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+                   -std::numeric_limits<float>::infinity()};
+
+    void grow(const Box& b) {
+        for (int k = 0; k < 3; ++k) {
+            lo[k] = std::fmin(lo[k], b.lo[k]);
+            hi[k] = std::fmax(hi[k], b.hi[k]);
+        }
+    }
+    void grow(const float p[3]) {
+        for (int k = 0; k < 3; ++k) {
+            lo[k] = std::fmin(lo[k], p[k]);
+            hi[k] = std::fmax(hi[k], p[k]);
+        }
+    }
+    /// Half the surface area (the constant factor does not matter to the SAH); 0 when empty.
+    [[nodiscard]] float half_area() const {
+        const float dx = hi[0] - lo[0], dy = hi[1] - lo[1], dz = hi[2] - lo[2];
+        if (!(dx >= 0.0f && dy >= 0.0f && dz >= 0.0f)) return 0.0f;
+        return dx * dy + dy * dz + dz * dx;
+    }
+};
+
+/// Largest float <= x and smallest float >= x: outward rounding of box corners.
+inline float round_down(double x) {
+    float f = static_cast<float>(x);
+    return static_cast<double>(f) > x ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
+}
+inline float round_up(double x) {
+    float f = static_cast<float>(x);
+    return static_cast<double>(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
+}
+
+/// A ray in world space. The origin stays in double precision whatever the kernel's
+/// precision, so kernels can subtract it from the vertices before rounding (work relative
+/// to the ray origin, not to the world origin). `t` is in units of `dir`'s length.
+struct Ray {
+    double org[3];
+    double dir[3];
+    double tmin;
+    double tmax;
+};
+
+/// The closest hit found so far. `prim` indexes the scene's (BVH-ordered) triangles;
+/// `b` holds the weights of the triangle's three points, in its own point order.
+template <class Real>
+struct Hit {
+    double t = std::numeric_limits<double>::infinity();
+    Real b[3] = {0, 0, 0};
+    uint32_t prim = UINT32_MAX;
+    [[nodiscard]] bool found() const { return prim != UINT32_MAX; }
+};
+
+}  // namespace vrc

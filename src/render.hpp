@@ -1,0 +1,78 @@
+// The tile renderer: rays in tiles spread over worker threads, closest hits written into
+// caller-owned arrays.
+#pragma once
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "traverse.hpp"
+
+namespace vrc {
+
+/// Caller-owned output arrays, one element (three for barycentrics) per ray. Only
+/// `triangle_id` is required; a null pointer means "not asked for" and is not written.
+template <class Real>
+struct Outputs {
+    int64_t* triangle_id;  ///< input triangle index, -1 on a miss
+    Real* depth;           ///< camera depth (or t for array rays), NaN on a miss
+    Real* barycentric;     ///< (n, 3) weights of the triangle's points, NaN on a miss
+};
+
+/// Called about every 50 ms from the calling thread with (tiles done, tiles total);
+/// returning false aborts the cast between tiles.
+using Poll = std::function<bool(std::size_t, std::size_t)>;
+
+/// Casts every ray of `rays`, tiles shared among `threads` workers. Returns false when
+/// `poll` aborted the cast (outputs then partly written).
+template <template <class> class Kernel, class Real, class Rays>
+bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, unsigned threads, const Poll& poll) {
+    const std::size_t n_tiles = rays.n_tiles();
+    std::atomic<std::size_t> next{0}, done{0};
+    std::atomic<bool> abort{false};
+    std::mutex mutex;
+    std::condition_variable finished;
+    constexpr Real kNaN = std::numeric_limits<Real>::quiet_NaN();
+
+    auto work = [&] {
+        for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
+            rays.for_each_in_tile(tile, [&](std::size_t k) {
+                const Hit<Real> hit = closest_hit<Kernel, Real>(scene, rays.ray(k));
+                const bool found = hit.found();
+                out.triangle_id[k] = found ? int64_t(scene.prim_ids[hit.prim]) : -1;
+                if (out.depth) out.depth[k] = found ? static_cast<Real>(rays.depth(hit.t)) : kNaN;
+                if (out.barycentric)
+                    for (int c = 0; c < 3; ++c) out.barycentric[3 * k + c] = found ? hit.b[c] : kNaN;
+            });
+            if (done.fetch_add(1) + 1 == n_tiles) {
+                std::lock_guard<std::mutex> lock(mutex);
+                finished.notify_all();
+            }
+        }
+    };
+    const unsigned n_workers = std::max(1u, std::min<unsigned>(threads, unsigned(std::max<std::size_t>(n_tiles, 1))));
+    std::vector<std::thread> workers;
+    for (unsigned w = 0; w < n_workers; ++w) workers.emplace_back(work);
+    {
+        std::unique_lock<std::mutex> lock(mutex);
+        while (done.load() < n_tiles && !abort.load()) {
+            finished.wait_for(lock, std::chrono::milliseconds(50));
+            if (poll && done.load() < n_tiles) {
+                lock.unlock();
+                if (!poll(done.load(), n_tiles)) abort = true;
+                lock.lock();
+            }
+        }
+    }
+    for (auto& t : workers) t.join();
+    return !abort.load();
+}
+
+}  // namespace vrc

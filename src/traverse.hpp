@@ -1,0 +1,105 @@
+// Closest-hit traversal of the BVH, templated on the intersection kernel and precision so
+// every strategy shares one loop.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "bvh.hpp"
+#include "geometry.hpp"
+
+namespace vrc {
+
+/// Ray-box slab test made conservative as in Ize, "Robust BVH Ray Traversal" (JCGT 2013):
+/// each slab distance carries at most gamma(3) relative error, so the far distance is
+/// widened by 1 + 2 gamma(3). NaN slab distances (origin on a slab of a zero direction
+/// component) are ignored rather than rejecting the box.
+struct BoxTester {
+    double org[3];
+    double inv[3];
+    int near_is_hi[3];
+    static constexpr double kUlp = std::numeric_limits<double>::epsilon() / 2;
+    static constexpr double kWiden = 1.0 + 2.0 * (3 * kUlp / (1 - 3 * kUlp));
+
+    explicit BoxTester(const Ray& ray) {
+        for (int k = 0; k < 3; ++k) {
+            org[k] = ray.org[k];
+            inv[k] = 1.0 / ray.dir[k];
+            near_is_hi[k] = std::signbit(inv[k]);
+        }
+    }
+
+    /// Entry distance of the box when it overlaps [tmin, tmax], else +infinity.
+    [[nodiscard]] double enter(const Box& box, double tmin, double tmax) const {
+        double t0 = tmin, t1 = tmax;
+        for (int k = 0; k < 3; ++k) {
+            const double lo = near_is_hi[k] ? box.hi[k] : box.lo[k];
+            const double hi = near_is_hi[k] ? box.lo[k] : box.hi[k];
+            const double tn = (lo - org[k]) * inv[k];
+            const double tf = (hi - org[k]) * inv[k] * kWiden;
+            t0 = tn > t0 ? tn : t0;  // written so that NaN leaves the bound unchanged
+            t1 = tf < t1 ? tf : t1;
+        }
+        return t0 <= t1 ? t0 : std::numeric_limits<double>::infinity();
+    }
+};
+
+/// Closest hit along `ray` with ray.tmin <= t <= ray.tmax. Equal `t` goes to the lowest
+/// input triangle index, so duplicates and coplanar overlaps have one deterministic winner.
+template <template <class> class Kernel, class Real>
+Hit<Real> closest_hit(const Scene& scene, const Ray& ray) {
+    Hit<Real> hit;
+    if (scene.nodes.empty()) return hit;
+    const BoxTester boxes(ray);
+    if (boxes.enter(scene.nodes[0].box, ray.tmin, ray.tmax) == std::numeric_limits<double>::infinity()) return hit;
+    const Kernel<Real> kernel(ray);
+    double bound = ray.tmax;
+    struct Pending {
+        uint32_t node;
+        double enter;
+    } stack[128];
+    int top = 0;
+    uint32_t current = 0;
+    for (;;) {
+        const Node& node = scene.nodes[current];
+        if (node.is_leaf()) {
+            for (uint32_t i = node.index, end = node.index + node.count; i < end; ++i) {
+                const uint32_t* tri = scene.triangles.data() + 3 * std::size_t(i);
+                double t;
+                Real b[3];
+                if (kernel(scene.point(tri[0]), scene.point(tri[1]), scene.point(tri[2]), ray.tmin, bound, t, b) &&
+                    (!hit.found() || t < hit.t || scene.prim_ids[i] < scene.prim_ids[hit.prim])) {
+                    // the kernel already checked t <= bound = hit.t, so here t < hit.t or a tie
+                    hit.t = bound = t;
+                    hit.prim = i;
+                    hit.b[0] = b[0];
+                    hit.b[1] = b[1];
+                    hit.b[2] = b[2];
+                }
+            }
+        } else {
+            const uint32_t left = node.index;
+            double tl = boxes.enter(scene.nodes[left].box, ray.tmin, bound);
+            double tr = boxes.enter(scene.nodes[left + 1].box, ray.tmin, bound);
+            constexpr double kMiss = std::numeric_limits<double>::infinity();
+            if (tl != kMiss || tr != kMiss) {
+                uint32_t first = left, second = left + 1;
+                if (tr < tl) {
+                    std::swap(first, second);
+                    std::swap(tl, tr);
+                }
+                if (tr != kMiss) stack[top++] = {second, tr};
+                current = first;
+                continue;
+            }
+        }
+        do {  // pop, skipping nodes that now start beyond the closest hit
+            if (top == 0) return hit;
+            --top;
+        } while (stack[top].enter > bound);
+        current = stack[top].node;
+    }
+}
+
+}  // namespace vrc

@@ -1,0 +1,263 @@
+"""The camera: the seed lecture's model (eye, window at distance ``d``, pixels), or VTK's."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Camera"]
+
+
+def _vector(value: Any, name: str) -> np.ndarray:
+    v = np.asarray(value, dtype=np.float64).reshape(-1)
+    if v.shape != (3,):
+        raise ValueError(f"{name} must be a 3-vector, got shape {np.shape(value)}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be finite, got {v.tolist()}")
+    return v
+
+
+def _positive(value: float, name: str) -> float:
+    value = float(value)
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a positive finite number, got {value}")
+    return value
+
+
+def _pixels(value: Any, name: str) -> int:
+    if isinstance(value, bool) or not float(value).is_integer():
+        raise ValueError(f"{name} must be a whole number of pixels, got {value!r}")
+    value = int(value)
+    if value < 1:
+        raise ValueError(f"{name} must be at least 1 pixel, got {value}")
+    return value
+
+
+class Camera:
+    """A pinhole (or parallel) camera and its pixel grid.
+
+    The model of the seed lecture: the eye at the origin of camera space looks down
+    ``-z``; the image window ``w x h`` lies at distance ``d``; pixel ``(i, j)``, ``j``
+    counted from the top, has its centre at ``x = -w/2 + w/nx (i + 1/2)``,
+    ``y = h/2 - h/ny (j + 1/2)``, ``z = -d``. The ray through it is ``P(t) = t P_ij``,
+    so ``t = 1`` is the image plane. Output images follow VTK's order instead: row 0 is
+    the bottom row (``j = ny - 1``).
+
+    Parameters
+    ----------
+    eye, look_at, view_up : sequence of float
+        Eye position, a point it looks at, and the up direction (orthogonalised against
+        the view direction, as ``vtkCamera`` does).
+    d : float, default: 1.0
+        Distance from the eye to the image plane.
+    w, h : float, optional
+        Window size on the image plane. Give both, one (the other follows the pixel
+        aspect ratio ``nx / ny``), or neither and a ``view_angle``.
+    nx, ny : int, default: 640, 480
+        Pixels across and down.
+    view_angle : float, optional
+        Vertical view angle in degrees (as ``vtkCamera``): ``h = 2 d tan(a/2)``,
+        ``w = h nx / ny``. Defaults to VTK's 30 degrees when neither ``w`` nor ``h`` is given.
+    parallel : bool, default: False
+        Parallel projection: every ray has the view direction and starts on the plane
+        through the eye; ``h`` is twice VTK's parallel scale.
+    near, far : float, default: 0, inf
+        Accepted hit depths along the view direction. ``near=d`` is the seed's rule that
+        hits in front of the image plane are outside the frustum.
+
+    Examples
+    --------
+    >>> from vtkraycast import Camera
+    >>> cam = Camera((0, 0, 5), (0, 0, 0), (0, 1, 0), d=1.0, w=2.0, h=1.0, nx=4, ny=2)
+    >>> cam.pixel_center(0, 0)
+    array([-0.75,  0.25, -1.  ])
+    >>> cam.right, cam.up, cam.backward
+    (array([1., 0., 0.]), array([0., 1., 0.]), array([0., 0., 1.]))
+    >>> Camera((0, 0, 5), (0, 0, 0), (0, 0, 1))
+    Traceback (most recent call last):
+    ...
+    ValueError: view_up is parallel to the view direction ...
+    """
+
+    _FIELDS = ("eye", "look_at", "view_up", "d", "w", "h", "nx", "ny", "parallel", "near", "far")
+
+    def __init__(
+        self,
+        eye: Any,
+        look_at: Any,
+        view_up: Any,
+        *,
+        d: float = 1.0,
+        w: float | None = None,
+        h: float | None = None,
+        nx: int = 640,
+        ny: int = 480,
+        view_angle: float | None = None,
+        parallel: bool = False,
+        near: float = 0.0,
+        far: float = math.inf,
+    ) -> None:
+        eye_v, look_v, up_v = _vector(eye, "eye"), _vector(look_at, "look_at"), _vector(view_up, "view_up")
+        d = _positive(d, "d")
+        nx, ny = _pixels(nx, "nx"), _pixels(ny, "ny")
+        if view_angle is not None and (w is not None or h is not None):
+            raise ValueError("give either view_angle or the window size w/h, not both")
+        if w is None and h is None:
+            angle = 30.0 if view_angle is None else float(view_angle)
+            if not (0.0 < angle < 180.0):
+                raise ValueError(f"view_angle must be strictly between 0 and 180 degrees, got {angle}")
+            h = 2.0 * d * math.tan(math.radians(angle) / 2.0)
+        if h is None:
+            h = _positive(w, "w") * ny / nx
+        if w is None:
+            w = _positive(h, "h") * nx / ny
+        w, h = _positive(w, "w"), _positive(h, "h")
+        near, far = float(near), float(far)
+        if math.isnan(near) or math.isnan(far) or near < 0 or far <= near:
+            raise ValueError(f"need 0 <= near < far, got near={near}, far={far}")
+        forward = look_v - eye_v
+        if not np.linalg.norm(forward) > 0:
+            raise ValueError("eye and look_at coincide: the view direction is undefined")
+        values = (eye_v, look_v, up_v, d, w, h, nx, ny, bool(parallel), near, far)
+        for name, value in zip(self._FIELDS, values):
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
+            object.__setattr__(self, name, value)
+        self._axes()  # validates view_up against the view direction
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError("Camera is immutable; use Camera.replace(...) for a changed copy")
+
+    def __repr__(self) -> str:
+        parts = []
+        for name in self._FIELDS:
+            value = getattr(self, name)
+            parts.append(f"{name}={value.tolist() if isinstance(value, np.ndarray) else value!r}")
+        return f"Camera({', '.join(parts)})"
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Camera):
+            return NotImplemented
+        return all(np.array_equal(getattr(self, n), getattr(other, n)) for n in self._FIELDS)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def replace(self, **changes: Any) -> Camera:
+        """A copy with some parameters changed (keywords as in the constructor)."""
+        kwargs = {n: getattr(self, n) for n in self._FIELDS}
+        if "view_angle" in changes:
+            kwargs.pop("w"), kwargs.pop("h")
+        kwargs.update(changes)
+        return Camera(kwargs.pop("eye"), kwargs.pop("look_at"), kwargs.pop("view_up"), **kwargs)
+
+    def _axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        backward = self.eye - self.look_at
+        backward = backward / np.linalg.norm(backward)
+        right = np.cross(self.view_up, backward)
+        norm = np.linalg.norm(right)
+        if not norm > 1e-12 * np.linalg.norm(self.view_up):
+            raise ValueError("view_up is parallel to the view direction (or zero): the image orientation is undefined")
+        right = right / norm
+        return right, np.cross(backward, right), backward
+
+    @property
+    def right(self) -> np.ndarray:
+        """Unit x axis of camera space (right on the image), in world coordinates."""
+        return self._axes()[0]
+
+    @property
+    def up(self) -> np.ndarray:
+        """Unit y axis of camera space: ``view_up`` made orthogonal to the view direction."""
+        return self._axes()[1]
+
+    @property
+    def backward(self) -> np.ndarray:
+        """Unit z axis of camera space: the eye looks along ``-backward``."""
+        return self._axes()[2]
+
+    @property
+    def frame(self) -> np.ndarray:
+        """Rows ``eye, right, up, backward``: the camera-to-world frame the native core takes."""
+        return np.ascontiguousarray(np.vstack((self.eye, *self._axes())))
+
+    @property
+    def view_angle(self) -> float:
+        """Vertical view angle in degrees, ``2 atan(h / 2d)``."""
+        return math.degrees(2.0 * math.atan(self.h / (2.0 * self.d)))
+
+    def pixel_center(self, i: int, j: int) -> np.ndarray:
+        """Centre of pixel ``(i, j)`` in camera coordinates, ``j`` counted from the top (the seed)."""
+        return np.array([
+            -self.w * 0.5 + self.w / self.nx * (i + 0.5),
+            self.h * 0.5 - self.h / self.ny * (j + 0.5),
+            -self.d,
+        ])
+
+    @classmethod
+    def from_vtk(cls, camera: Any, nx: int | None = None, ny: int | None = None) -> Camera:
+        """The camera of a ``vtkCamera``, ``pyvista.Camera``, ``vtkRenderer`` or ``pyvista.Plotter``.
+
+        Copies position, focal point, view up, view angle (or parallel scale) and the
+        clipping range. A renderer or plotter also gives ``nx, ny`` (its size in pixels)
+        when they are not passed, so the cast overlays its screenshot pixel for pixel.
+
+        Examples
+        --------
+        >>> from vtkmodules.vtkRenderingCore import vtkCamera
+        >>> vc = vtkCamera()
+        >>> vc.SetPosition(0, 0, 10); vc.SetViewAngle(40); vc.SetClippingRange(1, 100)
+        >>> cam = Camera.from_vtk(vc, nx=200, ny=100)
+        >>> round(cam.view_angle, 6), cam.nx, cam.ny, cam.near, cam.far
+        (40.0, 200, 100, 1.0, 100.0)
+        """
+        size = None
+        renderer = None
+        if hasattr(camera, "renderer") and hasattr(camera, "window_size"):  # pyvista.Plotter
+            renderer = camera.renderer
+            size = tuple(camera.window_size)
+        elif hasattr(camera, "GetActiveCamera") and hasattr(camera, "GetSize"):  # vtkRenderer
+            renderer = camera
+            size = tuple(camera.GetSize())
+        if renderer is not None:
+            camera = renderer.GetActiveCamera()
+        if not hasattr(camera, "GetPosition") or not hasattr(camera, "GetParallelScale"):
+            raise TypeError(
+                f"expected a vtkCamera, pyvista.Camera, vtkRenderer or pyvista.Plotter, got {type(camera).__name__}"
+            )
+        if tuple(camera.GetWindowCenter()) != (0.0, 0.0) or camera.GetUseOffAxisProjection():
+            raise ValueError("off-centre and off-axis vtkCamera projections are not supported")
+        if nx is None or ny is None:
+            if size is None or min(size) < 1:
+                size = (640, 480)
+            nx = size[0] if nx is None else nx
+            ny = size[1] if ny is None else ny
+        nx, ny = _pixels(nx, "nx"), _pixels(ny, "ny")
+        eye = np.array(camera.GetPosition(), dtype=np.float64)
+        focal = np.array(camera.GetFocalPoint(), dtype=np.float64)
+        near, far = camera.GetClippingRange()
+        d = float(np.linalg.norm(focal - eye)) or 1.0
+        common = dict(d=d, nx=nx, ny=ny, near=near, far=far)
+        if camera.GetParallelProjection():
+            h = 2.0 * camera.GetParallelScale()
+            return cls(eye, focal, camera.GetViewUp(), h=h, parallel=True, **common)
+        angle = math.radians(camera.GetViewAngle())
+        if camera.GetUseHorizontalViewAngle():
+            return cls(eye, focal, camera.GetViewUp(), w=2.0 * d * math.tan(angle / 2.0), **common)
+        return cls(eye, focal, camera.GetViewUp(), h=2.0 * d * math.tan(angle / 2.0), **common)
+
+    def to_vtk(self) -> Any:
+        """An equivalent ``vtkCamera`` (position, focal point, view up, angle or scale, clipping range)."""
+        from vtkmodules.vtkRenderingCore import vtkCamera
+
+        camera = vtkCamera()
+        camera.SetPosition(*self.eye)
+        camera.SetFocalPoint(*self.look_at)
+        camera.SetViewUp(*self.up)
+        camera.SetParallelProjection(self.parallel)
+        camera.SetParallelScale(self.h / 2.0)
+        camera.SetViewAngle(self.view_angle)
+        far = self.far if math.isfinite(self.far) else 1e30
+        camera.SetClippingRange(max(self.near, 1e-6 * far), far)
+        return camera

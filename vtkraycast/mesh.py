@@ -1,0 +1,183 @@
+"""Mesh preparation: any VTK dataset to float64 points and uint32 triangles, with a map
+from every triangle back to the input cell it came from."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from vtkmodules.util.numpy_support import numpy_to_vtkIdTypeArray, vtk_to_numpy
+from vtkmodules.vtkCommonCore import vtkIdTypeArray
+from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkDataSet, vtkPolyData
+from vtkmodules.vtkFiltersCore import vtkTriangleFilter
+from vtkmodules.vtkFiltersGeometry import vtkDataSetSurfaceFilter
+
+__all__ = ["PreparedMesh", "prepare_mesh"]
+
+
+@dataclass(frozen=True)
+class PreparedMesh:
+    """Triangles ready for the native core, and what the fields need to find the input data.
+
+    Attributes
+    ----------
+    points : numpy.ndarray
+        ``(n_points, 3)`` float64 coordinates (a copy when the input's were not float64).
+    triangles : numpy.ndarray
+        ``(n_triangles, 3)`` uint32 point indices, ordered by input cell.
+    cell_ids : numpy.ndarray
+        ``(n_triangles,)`` int64 id of the input cell each triangle came from.
+    surface_cell_ids : numpy.ndarray
+        ``(n_triangles,)`` int64 id of the cell of ``surface`` each triangle came from
+        (the same array as ``cell_ids`` for polygonal input).
+    surface : vtkPolyData
+        The polygonal data whose point and cell arrays are interpolated (the input itself
+        for polygonal input; its extracted surface otherwise). Never modified.
+    """
+
+    points: np.ndarray
+    triangles: np.ndarray
+    cell_ids: np.ndarray
+    surface_cell_ids: np.ndarray
+    surface: vtkPolyData
+
+    @property
+    def n_triangles(self) -> int:
+        return int(self.triangles.shape[0])
+
+
+def _cells(cell_array: vtkCellArray) -> tuple[np.ndarray, np.ndarray]:
+    """Offsets and connectivity of a vtkCellArray as int64 numpy arrays (views when possible)."""
+    offsets = vtk_to_numpy(cell_array.GetOffsetsArray()).astype(np.int64, copy=False)
+    connectivity = vtk_to_numpy(cell_array.GetConnectivityArray()).astype(np.int64, copy=False)
+    return offsets, connectivity
+
+
+def _triangles_of_polys(poly: vtkPolyData, first_id: int) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles of the polygon cells: triangles as they are, larger polygons through
+    vtkTriangleFilter (ear cutting handles concave ones), fewer than 3 points dropped."""
+    offsets, conn = _cells(poly.GetPolys())
+    sizes = np.diff(offsets)
+    tri_cells = np.flatnonzero(sizes == 3)
+    tris = conn[offsets[tri_cells][:, None] + np.arange(3)]
+    ids = tri_cells
+    big = np.flatnonzero(sizes > 3)
+    if big.size:
+        big_tris, big_ids = _triangulate_polygons(poly, offsets, conn, big)
+        tris = np.concatenate((tris, big_tris))
+        ids = np.concatenate((ids, big_ids))
+        order = np.argsort(ids, kind="stable")
+        tris, ids = tris[order], ids[order]
+    return tris, ids + first_id
+
+
+def _triangulate_polygons(
+    poly: vtkPolyData, offsets: np.ndarray, conn: np.ndarray, cells: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    # Only polygons go into vtkTriangleFilter: with lines or vertices beside them VTK 9.7
+    # was seen to mis-size the cell data, so the cell map rides along on a polygon-only copy.
+    sizes = np.diff(offsets)[cells]
+    new_offsets = np.concatenate(([0], np.cumsum(sizes)))
+    gather = np.repeat(offsets[cells] - new_offsets[:-1], sizes) + np.arange(new_offsets[-1])
+    polys = vtkCellArray()
+    polys.SetData(numpy_to_vtkIdTypeArray(new_offsets, deep=True), numpy_to_vtkIdTypeArray(conn[gather], deep=True))
+    only = vtkPolyData()
+    only.SetPoints(poly.GetPoints())
+    only.SetPolys(polys)
+    source_cell = numpy_to_vtkIdTypeArray(cells.astype(np.int64), deep=True)
+    source_cell.SetName("vtkraycast_source_cell")
+    only.GetCellData().AddArray(source_cell)
+    triangulate = vtkTriangleFilter()
+    triangulate.SetInputData(only)
+    triangulate.PassVertsOff()
+    triangulate.PassLinesOff()
+    triangulate.Update()
+    out = triangulate.GetOutput()
+    out_offsets, out_conn = _cells(out.GetPolys())
+    if out_conn.size != 3 * (out_offsets.size - 1):
+        raise RuntimeError("vtkTriangleFilter returned non-triangle cells")
+    ids = vtk_to_numpy(out.GetCellData().GetArray("vtkraycast_source_cell")).astype(np.int64)
+    return out_conn.reshape(-1, 3), ids
+
+
+def _triangles_of_strips(poly: vtkPolyData, first_id: int) -> tuple[np.ndarray, np.ndarray]:
+    """Strip (p0, p1, p2, p3, ...) gives (p0, p1, p2), (p2, p1, p3), ...: every other
+    triangle swaps its first two points to keep one orientation, as vtkTriangleStrip does."""
+    offsets, conn = _cells(poly.GetStrips())
+    counts = np.maximum(np.diff(offsets) - 2, 0)
+    strip = np.repeat(np.arange(counts.size), counts)
+    k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    base = offsets[strip] + k
+    odd = (k % 2).astype(bool)
+    first = np.where(odd, base + 1, base)
+    second = np.where(odd, base, base + 1)
+    tris = np.stack((conn[first], conn[second], conn[base + 2]), axis=1)
+    return tris, strip + first_id
+
+
+def as_polydata(mesh: Any) -> tuple[vtkPolyData, np.ndarray | None]:
+    """The input as vtkPolyData, and the map from its cells to the input's cells (None when
+    the input already is polygonal). Other datasets contribute their outer surface."""
+    if isinstance(mesh, vtkPolyData):
+        return mesh, None
+    if isinstance(mesh, vtkDataSet):
+        surface = vtkDataSetSurfaceFilter()
+        surface.SetInputData(mesh)
+        surface.PassThroughCellIdsOn()
+        surface.SetOriginalCellIdsName("vtkraycast_source_cell")
+        surface.Update()
+        out = vtkPolyData()
+        out.ShallowCopy(surface.GetOutput())
+        ids = out.GetCellData().GetArray("vtkraycast_source_cell")
+        cell_map = vtk_to_numpy(ids).astype(np.int64) if ids is not None else np.zeros(0, np.int64)
+        out.GetCellData().RemoveArray("vtkraycast_source_cell")
+        return out, cell_map
+    raise TypeError(
+        f"expected a vtkPolyData, pyvista.PolyData or another vtkDataSet, got {type(mesh).__name__}"
+    )
+
+
+def prepare_mesh(mesh: Any) -> PreparedMesh:
+    """Triangulates ``mesh`` for the native core without modifying it.
+
+    Polygons and triangle strips become triangles; vertex and line cells are ignored;
+    polygons with fewer than three points are dropped. Raises ``ValueError`` for
+    non-finite coordinates of any point a triangle uses.
+
+    Examples
+    --------
+    >>> import pyvista as pv
+    >>> from vtkraycast.mesh import prepare_mesh
+    >>> quad = pv.PolyData([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]], faces=[4, 0, 1, 2, 3])
+    >>> prepared = prepare_mesh(quad)
+    >>> prepared.n_triangles, prepared.cell_ids.tolist()
+    (2, [0, 0])
+    """
+    poly, cell_map = as_polydata(mesh)
+    n_points = poly.GetNumberOfPoints()
+    if n_points >= 2**32:
+        raise ValueError(f"meshes of at most 2**32 - 1 points are supported, got {n_points}")
+    vtk_points = poly.GetPoints()
+    if vtk_points is None or n_points == 0:
+        points = np.zeros((0, 3), np.float64)
+    else:
+        points = np.ascontiguousarray(vtk_to_numpy(vtk_points.GetData()), dtype=np.float64)
+    n_verts, n_lines, n_polys = poly.GetNumberOfVerts(), poly.GetNumberOfLines(), poly.GetNumberOfPolys()
+    parts = [_triangles_of_polys(poly, n_verts + n_lines)] if n_polys else []
+    if poly.GetNumberOfStrips():
+        parts.append(_triangles_of_strips(poly, n_verts + n_lines + n_polys))
+    if parts:
+        tris = np.concatenate([p[0] for p in parts])
+        ids = np.concatenate([p[1] for p in parts])
+    else:
+        tris, ids = np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    if tris.size and (tris.min() < 0 or tris.max() >= n_points):
+        raise ValueError("the mesh has cells that refer to points it does not have")
+    finite = np.isfinite(points).all(axis=1)
+    if not finite.all() and not finite[tris].all():
+        bad = int(np.flatnonzero(~finite)[0])
+        raise ValueError(f"the mesh has non-finite point coordinates (point {bad}: {points[bad].tolist()})")
+    ids = ids.astype(np.int64)
+    input_ids = ids if cell_map is None else cell_map[ids]
+    return PreparedMesh(points, np.ascontiguousarray(tris, dtype=np.uint32), input_ids, ids, poly)

@@ -1,0 +1,245 @@
+"""Scene: a mesh prepared once (triangles and BVH) and cast from any number of cameras."""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import numpy as np
+
+from . import _core
+from .camera import Camera
+from .fields import compute_arrays, needs_barycentric, select_arrays
+from .mesh import prepare_mesh
+
+__all__ = ["Scene", "STRATEGIES", "PRECISIONS"]
+
+#: Intersection strategies by name (DESIGN.md); "auto" picks the fastest exact one.
+STRATEGIES = ("auto", "watertight")
+PRECISIONS = {"float64": np.float64, "float32": np.float32}
+#: Refuse images whose output arrays alone would exceed this many bytes.
+_MAX_OUTPUT_BYTES = int(os.environ.get("VTKRAYCAST_MAX_OUTPUT_BYTES", 16 * 2**30))
+
+
+def _threads(threads: int | None) -> int:
+    if threads is None:
+        return 0  # the core uses every hardware thread
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise ValueError(f"threads must be a positive integer or None (all cores), got {threads!r}")
+    return int(threads)
+
+
+def _strategy(strategy: str) -> str:
+    if strategy not in STRATEGIES:
+        raise ValueError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
+    return "watertight" if strategy == "auto" else strategy
+
+
+def _precision(precision: str) -> type:
+    try:
+        return PRECISIONS[precision]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown precision {precision!r}; choose 'float64' or 'float32'") from None
+
+
+def _rays(value: Any, name: str) -> np.ndarray:
+    a = np.asarray(value)
+    if a.ndim == 1 and a.shape[0] == 3:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (n, 3), got {np.shape(value)}")
+    if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        raise TypeError(f"{name} must be numeric, got dtype {a.dtype}")
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name} must be finite; row {int(np.flatnonzero(~np.isfinite(a).all(1))[0])} is not")
+    return a
+
+
+class Scene:
+    """A triangle mesh prepared for ray casting: triangles and a BVH, built once.
+
+    Parameters
+    ----------
+    mesh : pyvista.PolyData or vtkDataSet
+        Polygons and strips are triangulated (each triangle remembers its input cell);
+        vertex and line cells are ignored; other datasets contribute their surface. The
+        mesh is copied: later changes to it do not affect the scene.
+    threads : int, optional
+        Threads for the build; all cores by default.
+
+    Examples
+    --------
+    >>> import pyvista as pv
+    >>> import vtkraycast as vrc
+    >>> scene = vrc.Scene(pv.Sphere())
+    >>> scene.n_triangles
+    1680
+    >>> hits = scene.intersect([[0, 0, 2]], [[0, 0, -1]])
+    >>> round(float(hits["t"][0]), 3)
+    1.5
+    """
+
+    def __init__(self, mesh: Any, *, threads: int | None = None) -> None:
+        self._mesh = prepare_mesh(mesh)
+        self._core = _core.Scene(self._mesh.points, self._mesh.triangles, _threads(threads))
+
+    @property
+    def n_triangles(self) -> int:
+        """Number of triangles after triangulation."""
+        return self._mesh.n_triangles
+
+    @property
+    def memory_bytes(self) -> int:
+        """Bytes held by the BVH, the triangles and the points in the native core."""
+        return int(self._core.memory_bytes)
+
+    @property
+    def prepared(self):  # noqa: ANN201 - PreparedMesh, kept out of the public namespace
+        """The triangulated mesh (points, triangles, cell map) the scene was built from."""
+        return self._mesh
+
+    def buffers(
+        self,
+        camera: Camera | Any,
+        *,
+        arrays: Iterable[str] | str | None = None,
+        strategy: str = "auto",
+        precision: str = "float64",
+        threads: int | None = None,
+        interpolate: bool = True,
+        progress: Callable[[int, int], bool | None] | None = None,
+    ) -> tuple[Camera, dict[str, np.ndarray]]:
+        """The camera and its output arrays as flat numpy arrays, one row per pixel
+        (pixel ``(i, r)`` at ``i + r * nx``, row 0 at the bottom). :meth:`cast` wraps them in
+        an image; this form needs no pyvista."""
+        if not isinstance(camera, Camera):
+            camera = Camera.from_vtk(camera)
+        names = select_arrays(self._mesh, arrays, interpolate)
+        real = _precision(precision)
+        kernel = _strategy(strategy)
+        n_threads = _threads(threads)
+        n = camera.nx * camera.ny
+        per_ray = 8 + (1 + 3) * np.dtype(real).itemsize
+        if n * per_ray > _MAX_OUTPUT_BYTES:
+            raise MemoryError(
+                f"a {camera.nx}x{camera.ny} image needs about {n * per_ray / 2**30:.1f} GiB for its "
+                f"geometry arrays alone, above the {_MAX_OUTPUT_BYTES / 2**30:.1f} GiB limit "
+                "(VTKRAYCAST_MAX_OUTPUT_BYTES); cast a smaller image or in parts"
+            )
+        triangle_id = np.empty(n, np.int64)
+        depth = np.empty(n, real) if "Depth" in names else None
+        bary = np.empty((n, 3), real) if needs_barycentric(self._mesh, names) else None
+        poll = _poll(progress)
+        done = _core.cast_camera(
+            self._core, camera.frame, camera.d, camera.w, camera.h, camera.near, camera.far,
+            camera.nx, camera.ny, camera.parallel, kernel, triangle_id, depth, bary, n_threads, poll,
+        )
+        if not done:
+            raise InterruptedError("the cast was aborted")
+        return camera, compute_arrays(self._mesh, names, triangle_id, depth, bary)
+
+    def cast(self, camera: Camera | Any, **options: Any) -> Any:
+        """Casts one ray per pixel of ``camera`` and returns the geometry buffer.
+
+        Parameters
+        ----------
+        camera : Camera, vtkCamera, pyvista.Camera, vtkRenderer or pyvista.Plotter
+            The view; VTK objects are converted with :meth:`Camera.from_vtk`.
+        arrays : str or sequence of str, optional
+            Output arrays to compute (``TriangleId``, ``CellId``, ``Barycentric``, ``Depth``,
+            ``Position``, ``Normal``, ``vtkValidPointMask`` and the mesh's own array
+            names). Default: all but ``Position`` and ``Normal``, plus the mesh's arrays
+            when ``interpolate``. Work for arrays not asked for is not done.
+        strategy : str, default: "auto"
+            Ray-triangle test; "auto" is the fastest exact one ("watertight").
+        precision : {"float64", "float32"}
+            Arithmetic of the intersection test and dtype of the floating outputs.
+        threads : int, optional
+            Worker threads; all cores by default.
+        interpolate : bool, default: True
+            Include the mesh's point arrays (interpolated) and cell arrays by default.
+        progress : callable, optional
+            Called as ``progress(tiles_done, tiles_total)`` about every 50 ms; returning
+            False aborts the cast (``InterruptedError``).
+
+        Returns
+        -------
+        pyvista.ImageData
+            Dimensions ``(nx, ny, 1)``, spacing 1, origin 0; the arrays as point data.
+        """
+        camera, buffers = self.buffers(camera, **options)
+        return to_image(camera, buffers)
+
+    def intersect(
+        self,
+        origins: Any,
+        directions: Any,
+        *,
+        tmin: float = 0.0,
+        tmax: float = math.inf,
+        strategy: str = "auto",
+        precision: str = "float64",
+        threads: int | None = None,
+    ) -> dict[str, np.ndarray]:
+        """Closest hits of arbitrary rays ``origin + t * direction``, ``tmin <= t <= tmax``.
+
+        Returns a dict of arrays: ``triangle_id`` and ``cell_id`` (int64, -1 on a miss),
+        ``t`` (in units of the direction's length, NaN on a miss) and ``barycentric``
+        (``(n, 3)`` weights of the triangle's points, NaN on a miss).
+        """
+        o, d = _rays(origins, "origins"), _rays(directions, "directions")
+        if o.shape[0] != d.shape[0]:
+            raise ValueError(f"origins and directions differ in length: {o.shape[0]} and {d.shape[0]}")
+        if o.shape[0] and not (np.abs(d).max(axis=1) > 0).all():
+            raise ValueError("directions must be non-zero")
+        tmin, tmax = float(tmin), float(tmax)
+        if math.isnan(tmin) or math.isnan(tmax) or tmin > tmax:
+            raise ValueError(f"need tmin <= tmax, got tmin={tmin}, tmax={tmax}")
+        real = _precision(precision)
+        n = o.shape[0]
+        triangle_id = np.empty(n, np.int64)
+        t = np.empty(n, real)
+        bary = np.empty((n, 3), real)
+        _core.cast_rays(self._core, o, d, tmin, tmax, _strategy(strategy), triangle_id, t, bary, _threads(threads), _poll(None))
+        hits = compute_arrays(self._mesh, ["CellId"], triangle_id, t, bary)
+        return {"triangle_id": triangle_id, "cell_id": hits["CellId"], "t": t, "barycentric": bary}
+
+
+def _poll(progress: Callable[[int, int], bool | None] | None) -> Callable[[int, int], bool] | None:
+    if progress is None:
+        return None
+    return lambda done, total: progress(done, total) is not False
+
+
+def to_image(camera: Camera, buffers: dict[str, np.ndarray]) -> Any:
+    """Wraps flat per-pixel arrays into a ``pyvista.ImageData`` of ``camera``'s size."""
+    import pyvista as pv
+
+    image = pv.ImageData(dimensions=(camera.nx, camera.ny, 1))
+    for name, values in buffers.items():
+        image.point_data[name] = values
+    return image
+
+
+def cast(mesh: Any, camera: Camera | Any, **options: Any) -> Any:
+    """Casts ``mesh`` from ``camera`` once: ``Scene(mesh).cast(camera, ...)``.
+
+    Keyword options are those of :meth:`Scene.cast`. Build a :class:`Scene` instead when
+    the same mesh is cast from several cameras: the BVH is then built once.
+
+    Examples
+    --------
+    >>> import pyvista as pv
+    >>> import vtkraycast as vrc
+    >>> cam = vrc.Camera((0, 0, 3), (0, 0, 0), (0, 1, 0), view_angle=40, nx=64, ny=48)
+    >>> image = vrc.cast(pv.Sphere(), cam)
+    >>> image.dimensions
+    (64, 48, 1)
+    >>> int(image["vtkValidPointMask"].sum()) > 0
+    True
+    """
+    threads = options.get("threads")
+    return Scene(mesh, threads=threads).cast(camera, **options)
