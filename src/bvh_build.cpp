@@ -79,17 +79,19 @@ struct Builder {
     uint32_t split(uint32_t begin, uint32_t end, const Box& centroids, const Box& bounds) {
         const uint32_t count = end - begin;
         if (count <= 1) return begin;
+        // Fewer bins for small nodes: the per-node cost stays proportional to its size.
+        const int n_bins = static_cast<int>(std::min<uint32_t>(kBins, std::max<uint32_t>(4, count)));
         Box bins[3][kBins];
         uint32_t counts[3][kBins] = {};
         float scale[3];
         for (int k = 0; k < 3; ++k) {
             const float extent = centroids.hi[k] - centroids.lo[k];
-            const float s = extent > 0.0f ? kBins / extent : 0.0f;
+            const float s = extent > 0.0f ? n_bins / extent : 0.0f;
             scale[k] = std::isfinite(s) ? s : 0.0f;
         }
         auto bin_of = [&](const PrimRef& r, int k) {
             const int b = static_cast<int>((r.centroid[k] - centroids.lo[k]) * scale[k]);
-            return std::min(std::max(b, 0), kBins - 1);
+            return std::min(std::max(b, 0), n_bins - 1);
         };
         for (uint32_t i = begin; i < end; ++i) {
             for (int k = 0; k < 3; ++k) {
@@ -107,7 +109,7 @@ struct Builder {
             uint32_t right_count[kBins];
             Box acc;
             uint32_t n = 0;
-            for (int b = kBins - 1; b > 0; --b) {
+            for (int b = n_bins - 1; b > 0; --b) {
                 acc.grow(bins[k][b]);
                 n += counts[k][b];
                 right_area[b] = acc.half_area();
@@ -115,7 +117,7 @@ struct Builder {
             }
             acc = Box{};
             n = 0;
-            for (int b = 0; b < kBins - 1; ++b) {
+            for (int b = 0; b < n_bins - 1; ++b) {
                 acc.grow(bins[k][b]);
                 n += counts[k][b];
                 const float cost = kTraversalCost + (acc.half_area() * n + right_area[b + 1] * right_count[b + 1]) * inv_area;

@@ -17,14 +17,14 @@ struct Box {
 
     void grow(const Box& b) {
         for (int k = 0; k < 3; ++k) {
-            lo[k] = std::fmin(lo[k], b.lo[k]);
-            hi[k] = std::fmax(hi[k], b.hi[k]);
+            lo[k] = b.lo[k] < lo[k] ? b.lo[k] : lo[k];  // not std::fmin: that is a libm call
+            hi[k] = b.hi[k] > hi[k] ? b.hi[k] : hi[k];
         }
     }
     void grow(const float p[3]) {
         for (int k = 0; k < 3; ++k) {
-            lo[k] = std::fmin(lo[k], p[k]);
-            hi[k] = std::fmax(hi[k], p[k]);
+            lo[k] = p[k] < lo[k] ? p[k] : lo[k];
+            hi[k] = p[k] > hi[k] ? p[k] : hi[k];
         }
     }
     /// Half the surface area (the constant factor does not matter to the SAH); 0 when empty.

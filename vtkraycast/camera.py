@@ -247,6 +247,58 @@ class Camera:
             return cls(eye, focal, camera.GetViewUp(), w=2.0 * d * math.tan(angle / 2.0), **common)
         return cls(eye, focal, camera.GetViewUp(), h=2.0 * d * math.tan(angle / 2.0), **common)
 
+    @classmethod
+    def framing(
+        cls,
+        bounds: Any,
+        *,
+        view: str = "iso",
+        nx: int = 640,
+        ny: int = 480,
+        view_angle: float = 30.0,
+        parallel: bool = False,
+    ) -> Camera:
+        """A camera that frames the box ``bounds = (xmin, xmax, ymin, ymax, zmin, zmax)``.
+
+        ``view`` names the side the eye looks from: ``"iso"`` (from +x +y +z),
+        ``"+x"``, ``"-x"``, ``"+y"``, ``"-y"``, ``"+z"``, ``"-z"``, or pyvista's
+        ``"xy"``, ``"xz"``, ``"yz"`` (from +z, -y and +x). The whole bounding sphere fits
+        in the window with a small margin.
+
+        Examples
+        --------
+        >>> cam = Camera.framing((-1, 1, -1, 1, -1, 1), view="+z", nx=10, ny=10)
+        >>> cam.look_at.tolist(), cam.right.round(6).tolist()
+        ([0.0, 0.0, 0.0], [1.0, 0.0, 0.0])
+        """
+        b = np.asarray(bounds, dtype=np.float64).reshape(-1)
+        if b.shape != (6,) or not np.isfinite(b).all() or (b[1::2] < b[0::2]).any():
+            raise ValueError(f"bounds must be finite (xmin, xmax, ymin, ymax, zmin, zmax), got {b.tolist()}")
+        try:
+            direction, up = _VIEWS[view]
+        except KeyError:
+            raise ValueError(f"unknown view {view!r}; choose one of {', '.join(_VIEWS)}") from None
+        centre = 0.5 * (b[0::2] + b[1::2])
+        direction = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
+        up = np.asarray(up, dtype=np.float64)
+        right = np.cross(up, direction)
+        right /= np.linalg.norm(right)
+        true_up = np.cross(direction, right)
+        # The box corners in camera axes (relative to the centre), then the nearest eye
+        # distance that keeps every corner inside the window.
+        corners = np.array(np.meshgrid(*b.reshape(3, 2), indexing="ij")).reshape(3, -1).T - centre
+        x, y, z = corners @ right, corners @ true_up, corners @ direction
+        tan_y = math.tan(math.radians(view_angle) / 2.0)
+        tan_x = tan_y * nx / ny
+        scale = 1.05  # a margin around the box
+        if parallel:
+            h = 2.0 * scale * max(float(np.abs(y).max()), float(np.abs(x).max()) * ny / nx, 1e-300)
+            distance = 2.0 * float(np.abs(z).max()) + h
+            return cls(centre + distance * direction, centre, up, d=distance, h=h, nx=nx, ny=ny, parallel=True)
+        distance = float(np.max(z + scale * np.maximum(np.abs(x) / tan_x, np.abs(y) / tan_y)))
+        distance = max(distance, float(np.abs(z).max()) * 1.01, 1e-300)
+        return cls(centre + distance * direction, centre, up, d=distance, view_angle=view_angle, nx=nx, ny=ny)
+
     def to_vtk(self) -> Any:
         """An equivalent ``vtkCamera`` (position, focal point, view up, angle or scale, clipping range)."""
         from vtkmodules.vtkRenderingCore import vtkCamera
@@ -261,3 +313,17 @@ class Camera:
         far = self.far if math.isfinite(self.far) else 1e30
         camera.SetClippingRange(max(self.near, 1e-6 * far), far)
         return camera
+
+
+_VIEWS = {
+    "iso": ((1.0, 1.0, 1.0), (0.0, 0.0, 1.0)),
+    "+x": ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+    "-x": ((-1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+    "+y": ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
+    "-y": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
+    "+z": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+    "-z": ((0.0, 0.0, -1.0), (0.0, 1.0, 0.0)),
+    "xy": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+    "xz": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
+    "yz": ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+}
