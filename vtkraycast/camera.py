@@ -310,8 +310,9 @@ class Camera:
         camera.SetParallelProjection(self.parallel)
         camera.SetParallelScale(self.h / 2.0)
         camera.SetViewAngle(self.view_angle)
+        # VTK needs 0 < near < far: an unbounded range becomes a very wide finite one.
         far = self.far if math.isfinite(self.far) else 1e30
-        camera.SetClippingRange(max(self.near, 1e-6 * far), far)
+        camera.SetClippingRange(self.near if self.near > 0 else 1e-6 * self.d, far)
         return camera
 
 

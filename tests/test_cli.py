@@ -1,0 +1,52 @@
+"""The command line writes a readable geometry buffer and picture."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyvista as pv
+from vtkmodules.vtkIOImage import vtkPNGReader
+
+
+def run(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "vtkraycast", *args], cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def read_png(path: Path) -> tuple[int, int]:
+    reader = vtkPNGReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    return reader.GetOutput().GetDimensions()[:2]
+
+
+def test_default_scene_writes_the_buffer_and_the_picture(tmp_path):
+    done = run(cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "triangles" in done.stdout and "hits" in done.stdout
+    image = pv.read(tmp_path / "raycast.vti")
+    assert image.dimensions == (800, 600, 1)
+    hits = int(image["vtkValidPointMask"].sum())
+    assert 0.02 * image.n_points < hits < image.n_points  # the frog is in view, not filling it
+    assert f"{hits} hits" in done.stdout
+    assert image["TriangleId"].max() < 1_600_000
+    np.testing.assert_allclose(np.nansum(image["Barycentric"], axis=1)[image["vtkValidPointMask"] == 1], 1.0, atol=1e-12)
+    assert read_png(tmp_path / "raycast.png") == (800, 600)
+
+
+def test_a_mesh_file_with_options(tmp_path):
+    source = Path(pv.examples.__file__).parent / "nut.ply"
+    done = run(str(source), "-o", "nut.vti", "--png", "nut.png", "--size", "64x32", "--view", "+z", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    image = pv.read(tmp_path / "nut.vti")
+    assert image.dimensions == (64, 32, 1)
+    assert read_png(tmp_path / "nut.png") == (64, 32)
+
+
+def test_bad_arguments_exit_with_a_message(tmp_path):
+    done = run("--size", "0x10", cwd=tmp_path)
+    assert done.returncode == 2 and "size must be at least 1x1" in done.stderr
+    done = run(str(tmp_path / "missing.vtk"), cwd=tmp_path)
+    assert done.returncode == 2 and "cannot read" in done.stderr
