@@ -65,17 +65,17 @@ Strategy parse_strategy(const std::string& name) {
 }
 
 template <class Real, class Rays>
-bool dispatch(const vrc::Scene& scene, const Rays& rays, Strategy strategy, const vrc::Outputs<Real>& out,
+bool dispatch(const vrc::Scene& scene, const Rays& rays, Strategy strategy, const vrc::Outputs<Real>& out, bool cull,
               unsigned threads, const vrc::Poll& poll) {
     switch (strategy) {
         case Strategy::Watertight:
-            return vrc::render<vrc::Watertight, Real>(scene, rays, out, threads, poll);
+            return vrc::render<vrc::Watertight, Real>(scene, rays, out, cull, threads, poll);
     }
     throw std::logic_error("unhandled strategy");
 }
 
 template <class Real, class Rays>
-bool run(const vrc::Scene& scene, const Rays& rays, const std::string& strategy, IdsOut triangle_id,
+bool run(const vrc::Scene& scene, const Rays& rays, const std::string& strategy, bool cull, IdsOut triangle_id,
          std::optional<ValuesOut<Real>> depth, std::optional<TriplesOut<Real>> barycentric, int threads,
          std::optional<nb::callable> progress) {
     const std::size_t n = rays.size();
@@ -89,7 +89,7 @@ bool run(const vrc::Scene& scene, const Rays& rays, const std::string& strategy,
     bool completed;
     {
         nb::gil_scoped_release release;
-        completed = dispatch<Real>(scene, rays, s, out, n_threads, std::ref(poll));
+        completed = dispatch<Real>(scene, rays, s, out, cull, n_threads, std::ref(poll));
     }
     if (poll.raised) throw nb::python_error();
     return completed;
@@ -101,8 +101,9 @@ void bind_precision(nb::module_& m) {
         "cast_camera",
         [](const vrc::Scene& scene, nb::ndarray<const double, nb::shape<4, 3>, nb::c_contig> frame, double d,
            double width, double height, double near, double far, int64_t nx, int64_t ny, bool parallel,
-           const std::string& strategy, IdsOut triangle_id, std::optional<ValuesOut<Real>> depth,
-           std::optional<TriplesOut<Real>> barycentric, int threads, std::optional<nb::callable> progress) {
+           const std::string& strategy, bool backface_culling, IdsOut triangle_id,
+           std::optional<ValuesOut<Real>> depth, std::optional<TriplesOut<Real>> barycentric, int threads,
+           std::optional<nb::callable> progress) {
             vrc::CameraSpec spec{};
             for (int k = 0; k < 3; ++k) {
                 spec.eye[k] = frame(0, k);
@@ -118,24 +119,24 @@ void bind_precision(nb::module_& m) {
             spec.nx = nx;
             spec.ny = ny;
             spec.parallel = parallel;
-            return run<Real>(scene, vrc::CameraRays(spec), strategy, triangle_id, depth, barycentric, threads,
-                             std::move(progress));
+            return run<Real>(scene, vrc::CameraRays(spec), strategy, backface_culling, triangle_id, depth,
+                             barycentric, threads, std::move(progress));
         },
         "scene"_a, "frame"_a, "d"_a, "width"_a, "height"_a, "near"_a, "far"_a, "nx"_a, "ny"_a, "parallel"_a,
-        "strategy"_a, "triangle_id"_a, "depth"_a.none(), "barycentric"_a.none(), "threads"_a,
+        "strategy"_a, "backface_culling"_a, "triangle_id"_a, "depth"_a.none(), "barycentric"_a.none(), "threads"_a,
         "progress"_a.none(),
         "Casts one ray per pixel of a camera (frame rows: eye, right, up, backward). Returns False if aborted.");
     m.def(
         "cast_rays",
         [](const vrc::Scene& scene, Points origins, Points directions, double tmin, double tmax,
-           const std::string& strategy, IdsOut triangle_id, std::optional<ValuesOut<Real>> t,
+           const std::string& strategy, bool backface_culling, IdsOut triangle_id, std::optional<ValuesOut<Real>> t,
            std::optional<TriplesOut<Real>> barycentric, int threads, std::optional<nb::callable> progress) {
             if (origins.shape(0) != directions.shape(0))
                 throw std::invalid_argument("origins and directions must have the same number of rows");
             return run<Real>(scene, vrc::ArrayRays(origins.data(), directions.data(), origins.shape(0), tmin, tmax),
-                             strategy, triangle_id, t, barycentric, threads, std::move(progress));
+                             strategy, backface_culling, triangle_id, t, barycentric, threads, std::move(progress));
         },
-        "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "strategy"_a, "triangle_id"_a, "t"_a.none(),
+        "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "strategy"_a, "backface_culling"_a, "triangle_id"_a, "t"_a.none(),
         "barycentric"_a.none(), "threads"_a, "progress"_a.none(),
         "Casts arbitrary rays ((n, 3) origins and directions). Returns False if aborted.");
 }

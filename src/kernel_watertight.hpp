@@ -17,14 +17,15 @@ namespace vrc {
 /// function that rounds to exactly 0 is re-evaluated in the next wider precision, for that
 /// edge alone, so the rule stays a function of the edge. A zero edge value counts as
 /// inside (both neighbours report the hit: a tie, never a leak). Degenerate triangles
-/// (zero projected area) are never hit.
+/// (zero projected area) are never hit. With back-face culling, triangles whose normal
+/// (right-hand rule over their point order) points away from the ray origin are skipped.
 template <class Real>
 class Watertight {
    public:
     /// Wider type used when an edge function is exactly 0.
     using Wide = std::conditional_t<std::is_same_v<Real, float>, double, long double>;
 
-    explicit Watertight(const Ray& ray) : org_(ray.org) {
+    Watertight(const Ray& ray, bool cull_back_faces) : org_(ray.org), cull_(cull_back_faces) {
         kz_ = 0;
         for (int k = 1; k < 3; ++k)
             if (std::fabs(ray.dir[k]) > std::fabs(ray.dir[kz_])) kz_ = k;
@@ -60,8 +61,8 @@ class Watertight {
         if (v == 0) v = static_cast<Real>(wide_edge(pa, pc));
         if (w == 0) w = static_cast<Real>(wide_edge(pb, pa));
         if ((u < 0 || v < 0 || w < 0) && (u > 0 || v > 0 || w > 0)) return false;
-        const Real det = u + v + w;
-        if (det == 0) return false;
+        const Real det = u + v + w;  // > 0 when the triangle faces the ray origin
+        if (det == 0 || (cull_ && det < 0)) return false;
         const Real az = sz_ * a[kz_], bz = sz_ * bb[kz_], cz = sz_ * c[kz_];
         const double tt = static_cast<double>((u * az + v * bz + w * cz) / det);
         if (!(tt >= tmin && tt <= tmax)) return false;
@@ -87,6 +88,7 @@ class Watertight {
     }
 
     const double* org_;
+    bool cull_;
     int kx_, ky_, kz_;
     Real sx_, sy_, sz_;
     Wide wsx_, wsy_;

@@ -48,12 +48,12 @@ struct BoxTester {
 /// Closest hit along `ray` with ray.tmin <= t <= ray.tmax. Equal `t` goes to the lowest
 /// input triangle index, so duplicates and coplanar overlaps have one deterministic winner.
 template <template <class> class Kernel, class Real>
-Hit<Real> closest_hit(const Scene& scene, const Ray& ray) {
+Hit<Real> closest_hit(const Scene& scene, const Ray& ray, bool cull_back_faces) {
     Hit<Real> hit;
     if (scene.nodes.empty()) return hit;
     const BoxTester boxes(ray);
     if (boxes.enter(scene.nodes[0].box, ray.tmin, ray.tmax) == std::numeric_limits<double>::infinity()) return hit;
-    const Kernel<Real> kernel(ray);
+    const Kernel<Real> kernel(ray, cull_back_faces);
     double bound = ray.tmax;
     struct Pending {
         uint32_t node;

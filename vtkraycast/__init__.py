@@ -2,13 +2,14 @@
 
 >>> import vtkraycast as vrc
 >>> sorted(vrc.__all__)
-['Camera', 'Scene', 'cast']
+['Camera', 'PRECISIONS', 'RayCastFilter', 'STRATEGIES', 'Scene', 'cast']
 """
 
 from __future__ import annotations
 
 from .camera import Camera
-from .scene import Scene, cast
+from .filter import RayCastFilter
+from .scene import PRECISIONS, STRATEGIES, Scene, cast
 
-__all__ = ["Camera", "Scene", "cast"]
+__all__ = ["Camera", "RayCastFilter", "Scene", "cast", "STRATEGIES", "PRECISIONS"]
 __version__ = "0.1.0"

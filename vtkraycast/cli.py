@@ -9,10 +9,12 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from vtkmodules.vtkCommonDataModel import vtkImageData
 
 from .camera import _VIEWS, Camera
 from .picture import barycentric_rgba, write_png
-from .scene import STRATEGIES, Scene, to_image
+from .image import fill_image
+from .scene import STRATEGIES, Scene
 
 
 def default_scene() -> Any:
@@ -67,7 +69,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     scene = Scene(mesh, threads=args.threads)
     camera, buffers = scene.buffers(camera, arrays=arrays, strategy=args.strategy, threads=args.threads)
     elapsed = time.perf_counter() - cast_start
-    to_image(camera, buffers).save(args.output)
+    pv.wrap(fill_image(vtkImageData(), camera, buffers)).save(args.output)
     facing = buffers["Normal"] @ camera.backward
     write_png(args.png, barycentric_rgba(buffers["Barycentric"], facing), nx, ny)
     hits = int(np.count_nonzero(buffers["vtkValidPointMask"]))

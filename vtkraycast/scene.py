@@ -4,14 +4,17 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
+from vtkmodules.vtkCommonDataModel import vtkImageData
 
 from . import _core
 from .camera import Camera
 from .fields import compute_arrays, needs_barycentric, select_arrays
+from .image import fill_image
 from .mesh import prepare_mesh
 
 __all__ = ["Scene", "STRATEGIES", "PRECISIONS"]
@@ -35,6 +38,12 @@ def _strategy(strategy: str) -> str:
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
     return "watertight" if strategy == "auto" else strategy
+
+
+def _accel(accel: str) -> str:
+    if accel != "bvh":
+        raise ValueError(f"unknown accel {accel!r}; choose 'bvh'")
+    return accel
 
 
 def _precision(precision: str) -> type:
@@ -108,9 +117,12 @@ class Scene:
         arrays: Iterable[str] | str | None = None,
         strategy: str = "auto",
         precision: str = "float64",
+        accel: str = "bvh",
         threads: int | None = None,
+        backface_culling: bool = False,
         interpolate: bool = True,
         progress: Callable[[int, int], bool | None] | None = None,
+        progress_bar: bool = False,
     ) -> tuple[Camera, dict[str, np.ndarray]]:
         """The camera and its output arrays as flat numpy arrays, one row per pixel
         (pixel ``(i, r)`` at ``i + r * nx``, row 0 at the bottom). :meth:`cast` wraps them in
@@ -120,6 +132,7 @@ class Scene:
         names = select_arrays(self._mesh, arrays, interpolate)
         real = _precision(precision)
         kernel = _strategy(strategy)
+        _accel(accel)
         n_threads = _threads(threads)
         n = camera.nx * camera.ny
         per_ray = 8 + (1 + 3) * np.dtype(real).itemsize
@@ -132,11 +145,12 @@ class Scene:
         triangle_id = np.empty(n, np.int64)
         depth = np.empty(n, real) if "Depth" in names else None
         bary = np.empty((n, 3), real) if needs_barycentric(self._mesh, names) else None
-        poll = _poll(progress)
-        done = _core.cast_camera(
-            self._core, camera.frame, camera.d, camera.w, camera.h, camera.near, camera.far,
-            camera.nx, camera.ny, camera.parallel, kernel, triangle_id, depth, bary, n_threads, poll,
-        )
+        with progress_reporter(progress, progress_bar, f"Ray casting {camera.nx}x{camera.ny}") as poll:
+            done = _core.cast_camera(
+                self._core, camera.frame, camera.d, camera.w, camera.h, camera.near, camera.far,
+                camera.nx, camera.ny, camera.parallel, kernel, bool(backface_culling),
+                triangle_id, depth, bary, n_threads, poll,
+            )
         if not done:
             raise InterruptedError("the cast was aborted")
         return camera, compute_arrays(self._mesh, names, triangle_id, depth, bary)
@@ -157,21 +171,37 @@ class Scene:
             Ray-triangle test; "auto" is the fastest exact one ("watertight").
         precision : {"float64", "float32"}
             Arithmetic of the intersection test and dtype of the floating outputs.
+        accel : {"bvh"}
+            Acceleration structure.
         threads : int, optional
             Worker threads; all cores by default.
+        backface_culling : bool, default: False
+            Skip triangles whose normal (right-hand rule over their points) faces away
+            from the eye.
         interpolate : bool, default: True
             Include the mesh's point arrays (interpolated) and cell arrays by default.
         progress : callable, optional
             Called as ``progress(tiles_done, tiles_total)`` about every 50 ms; returning
-            False aborts the cast (``InterruptedError``).
+            False aborts the cast (``InterruptedError``). Ctrl-C stops a cast too
+            (``KeyboardInterrupt``), between tiles.
+        progress_bar : bool, default: False
+            Show a progress bar on the terminal (needs ``tqdm``).
+        world_space : bool, default: False
+            Place the image on the camera's image plane in world space (origin, spacing
+            and direction matrix from the camera) instead of pixel space, to show it in
+            3D next to the mesh.
 
         Returns
         -------
         pyvista.ImageData
-            Dimensions ``(nx, ny, 1)``, spacing 1, origin 0; the arrays as point data.
+            Dimensions ``(nx, ny, 1)``, spacing 1, origin 0 unless ``world_space``; the
+            arrays as point data.
         """
+        world_space = options.pop("world_space", False)
         camera, buffers = self.buffers(camera, **options)
-        return to_image(camera, buffers)
+        import pyvista as pv
+
+        return pv.wrap(fill_image(vtkImageData(), camera, buffers, world_space=world_space))
 
     def intersect(
         self,
@@ -183,6 +213,7 @@ class Scene:
         strategy: str = "auto",
         precision: str = "float64",
         threads: int | None = None,
+        backface_culling: bool = False,
     ) -> dict[str, np.ndarray]:
         """Closest hits of arbitrary rays ``origin + t * direction``, ``tmin <= t <= tmax``.
 
@@ -203,25 +234,35 @@ class Scene:
         triangle_id = np.empty(n, np.int64)
         t = np.empty(n, real)
         bary = np.empty((n, 3), real)
-        _core.cast_rays(self._core, o, d, tmin, tmax, _strategy(strategy), triangle_id, t, bary, _threads(threads), _poll(None))
+        _core.cast_rays(
+            self._core, o, d, tmin, tmax, _strategy(strategy), bool(backface_culling),
+            triangle_id, t, bary, _threads(threads), None,
+        )
         hits = compute_arrays(self._mesh, ["CellId"], triangle_id, t, bary)
         return {"triangle_id": triangle_id, "cell_id": hits["CellId"], "t": t, "barycentric": bary}
 
 
-def _poll(progress: Callable[[int, int], bool | None] | None) -> Callable[[int, int], bool] | None:
-    if progress is None:
-        return None
-    return lambda done, total: progress(done, total) is not False
+@contextmanager
+def progress_reporter(
+    progress: Callable[[int, int], bool | None] | None, progress_bar: bool, title: str
+) -> Iterator[Callable[[int, int], bool] | None]:
+    """The core's poll callback: forwards to ``progress`` and advances a tqdm bar.
+    A ``progress`` that returns False aborts the cast."""
+    if not progress_bar:
+        yield None if progress is None else (lambda done, total: progress(done, total) is not False)
+        return
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        raise ImportError("progress_bar=True needs tqdm: pip install tqdm") from None
+    with tqdm(total=100, desc=title, unit="%") as bar:
 
+        def poll(done: int, total: int) -> bool:
+            bar.update(int(100 * done / total) - bar.n)
+            return progress is None or progress(done, total) is not False
 
-def to_image(camera: Camera, buffers: dict[str, np.ndarray]) -> Any:
-    """Wraps flat per-pixel arrays into a ``pyvista.ImageData`` of ``camera``'s size."""
-    import pyvista as pv
-
-    image = pv.ImageData(dimensions=(camera.nx, camera.ny, 1))
-    for name, values in buffers.items():
-        image.point_data[name] = values
-    return image
+        yield poll
+        bar.update(100 - bar.n)
 
 
 def cast(mesh: Any, camera: Camera | Any, **options: Any) -> Any:

@@ -1,0 +1,45 @@
+"""The geometry buffer as a vtkImageData: pixel space by default, or placed on the camera's
+image plane in world space."""
+
+from __future__ import annotations
+
+import numpy as np
+from vtkmodules.util.numpy_support import numpy_to_vtk
+from vtkmodules.vtkCommonDataModel import vtkImageData
+
+from .camera import Camera
+
+__all__ = ["image_geometry", "fill_image"]
+
+
+def image_geometry(camera: Camera | None, world_space: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Origin, spacing and direction matrix of the output image.
+
+    In pixel space: origin 0, spacing 1, identity. In world space the image lies on the
+    camera's image plane (distance ``d`` in front of the eye): the origin is the centre of
+    pixel (0, 0) (bottom left), the spacing is the pixel size ``(w / nx, h / ny)``, and the
+    direction matrix's columns are the camera's right, up and backward axes.
+    """
+    if not world_space:
+        return np.zeros(3), np.ones(3), np.eye(3)
+    sx, sy = camera.w / camera.nx, camera.h / camera.ny
+    x0, y0 = -camera.w / 2 + sx / 2, -camera.h / 2 + sy / 2
+    origin = camera.eye + x0 * camera.right + y0 * camera.up - camera.d * camera.backward
+    direction = np.column_stack((camera.right, camera.up, camera.backward))
+    return origin, np.array([sx, sy, 1.0]), direction
+
+
+def fill_image(image: vtkImageData, camera: Camera, buffers: dict[str, np.ndarray], *, world_space: bool = False) -> vtkImageData:
+    """Sets ``image`` to ``camera``'s pixel grid and adds ``buffers`` as point arrays (shared,
+    not copied)."""
+    origin, spacing, direction = image_geometry(camera, world_space)
+    image.SetDimensions(camera.nx, camera.ny, 1)
+    image.SetOrigin(*origin)
+    image.SetSpacing(*spacing)
+    image.SetDirectionMatrix(*direction.ravel())
+    point_data = image.GetPointData()
+    for name, values in buffers.items():
+        array = numpy_to_vtk(np.ascontiguousarray(values), deep=False)
+        array.SetName(name)
+        point_data.AddArray(array)
+    return image
