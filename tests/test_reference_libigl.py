@@ -407,3 +407,85 @@ def test_scene_cast_equals_cast(ref):
             np.testing.assert_array_equal(a[name], b[name], err_msg=name)
         assert (a["vtkValidPointMask"] == (a["TriangleId"] >= 0)).all()
         np.testing.assert_array_equal(a["CellId"], np.where(a["TriangleId"] >= 0, ref.scene.prepared.cell_ids[a["TriangleId"]], -1))
+
+
+def _c(x: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=np.float64)
+
+
+def exact_difference(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``a - b`` and, per row, whether it was computed without rounding (Knuth's TwoSum error is 0)."""
+    s = a - b
+    bb = s - a
+    err = (a - (s - bb)) + (-b - bb)
+    return s, (err == 0).all(1)
+
+
+def grid_eyes(ref: Reference, rng: np.random.Generator, n: int) -> np.ndarray:
+    """Eyes at 1.5-3 radii, snapped to a power-of-two grid so that target - eye is exact
+    for the float32-born mesh coordinates: the ray's line then passes exactly through the target."""
+    u = rng.normal(size=(n, 3))
+    grid = 2.0 ** np.floor(np.log2(ref.radius / 64))
+    eyes = ref.center + u / np.linalg.norm(u, axis=1, keepdims=True) * ref.radius * rng.uniform(1.5, 3.0, (n, 1))
+    return np.round(eyes / grid) * grid
+
+
+def test_no_leaks_where_the_surface_closes_around_the_ray(ref):
+    """Watertightness, decided with exact predicates rather than by comparison.
+
+    Each ray's line passes *exactly* through an edge midpoint or a vertex (exact direction,
+    checked). With orient3d we keep the rays around which the surface provably closes: for
+    an edge, the two triangles' third points lie on opposite sides of the plane (eye, edge);
+    for a vertex, its fan is closed, consistently oriented, and every fan triangle has the
+    same orientation seen from the eye (the projected fan winds around the vertex). Such a
+    ray must hit, at t <= 1 (t = 1 is the target; anything in front is fine). A miss or a
+    hit behind is a leak. libigl's (non-watertight) count is printed for comparison."""
+    rng = np.random.default_rng(9000 + len(ref.name))
+    V, F = ref.V, ref.F
+    n = 6000
+    # interior edges: exactly two triangles; half-edge rows (a, b, opposite point)
+    half = np.concatenate([F[:, [0, 1, 2]], F[:, [1, 2, 0]], F[:, [2, 0, 1]]])
+    key = np.minimum(half[:, 0], half[:, 1]) * len(V) + np.maximum(half[:, 0], half[:, 1])
+    order = np.argsort(key, kind="stable")
+    half, key = half[order], key[order]
+    _, start, count = np.unique(key, return_index=True, return_counts=True)
+    pair = start[count == 2]
+    k = rng.integers(0, pair.size, n)
+    a, b = V[half[pair[k], 0]], V[half[pair[k], 1]]
+    o_edge = grid_eyes(ref, rng, n)
+    d_edge, exact_edge = exact_difference((a + b) * 0.5, o_edge)  # (a + b) / 2 is exact for float32 inputs
+    side1 = orient3d(_c(o_edge), _c(a), _c(b), _c(V[half[pair[k], 2]]))
+    side2 = orient3d(_c(o_edge), _c(a), _c(b), _c(V[half[pair[k] + 1, 2]]))
+    closes_edge = exact_edge & (side1 * side2 < 0)
+    # vertices with a closed, consistently oriented fan; rows (v, x, y) in triangle order
+    rot = np.concatenate([F[:, [0, 1, 2]], F[:, [1, 2, 0]], F[:, [2, 0, 1]]])
+    rot = rot[np.argsort(rot[:, 0], kind="stable")]
+    starts = np.searchsorted(rot[:, 0], np.arange(len(V) + 1))
+    closed = np.zeros(len(V), bool)
+    for v in range(len(V)):
+        fan = rot[starts[v] : starts[v + 1]]
+        xs, ys = np.sort(fan[:, 1]), np.sort(fan[:, 2])
+        closed[v] = len(fan) >= 3 and np.array_equal(xs, ys) and np.unique(xs).size == xs.size
+    vs = rng.choice(np.flatnonzero(closed), n)
+    o_vert = grid_eyes(ref, rng, n)
+    d_vert, exact_vert = exact_difference(V[vs], o_vert)
+    size = starts[vs + 1] - starts[vs]
+    ray = np.repeat(np.arange(n), size)
+    fan = rot[np.concatenate([np.arange(starts[v], starts[v + 1]) for v in vs])]
+    s = orient3d(_c(o_vert[ray]), _c(V[fan[:, 0]]), _c(V[fan[:, 1]]), _c(V[fan[:, 2]]))
+    same_sign = (np.bincount(ray, s > 0, n) == size) | (np.bincount(ray, s < 0, n) == size)
+    closes_vert = exact_vert & same_sign
+
+    assert exact_edge.mean() > 0.99 and exact_vert.mean() > 0.99
+    for label, o, d, closes in (("edges", o_edge, d_edge, closes_edge), ("vertices", o_vert, d_vert, closes_vert)):
+        assert closes.sum() > n // 4, "too few rays where the surface provably closes: the test would be vacuous"
+        o, d = o[closes], d[closes]
+        hits = ref.scene.intersect(o, d)
+        leak = (hits["triangle_id"] < 0) | ~(hits["t"] <= 1.0 + 1e-12)
+        theirs, t_igl, _ = ref.igl(o, d)
+        igl_leak = (theirs < 0) | ~(t_igl <= 1.0 + 1e-6)
+        print(
+            f"\n[exact watertightness {ref.name}] {closes.sum()} rays exactly through closed {label}: "
+            f"vtkraycast leaks {leak.sum()}, libigl leaks {igl_leak.sum()}"
+        )
+        assert not leak.any(), f"leaks through {label}: rays {np.flatnonzero(leak)[:10]}"

@@ -40,7 +40,8 @@ class RayCastFilter(VTKPythonAlgorithmBase):
     >>> caster = vrc.RayCastFilter()
     >>> caster.SetCamera(camera)
     >>> caster.SetResolution(64, 48)
-    >>> image = (vtkSphereSource() >> caster).update().output
+    >>> sphere = vtkSphereSource()
+    >>> image = (sphere >> caster).update().output
     >>> image.GetDimensions(), caster.GetNumberOfSceneBuilds()
     ((64, 48, 1), 1)
     >>> camera.Azimuth(10)
@@ -151,6 +152,14 @@ class RayCastFilter(VTKPythonAlgorithmBase):
     def GetWorldSpace(self) -> bool:
         return self._world_space
 
+    def SetInputData(self, data: vtkDataSet) -> None:
+        """Uses ``data`` as the input, without an upstream algorithm."""
+        self.SetInputDataObject(0, data)
+
+    def GetOutput(self) -> vtkImageData:
+        """The output image (as vtkImageAlgorithm::GetOutput)."""
+        return vtkImageData.SafeDownCast(self.GetOutputDataObject(0))
+
     def GetNumberOfSceneBuilds(self) -> int:
         """How many times the acceleration structure was built (a diagnostic)."""
         return self._builds
@@ -209,6 +218,7 @@ class RayCastFilter(VTKPythonAlgorithmBase):
             fill_image(output, camera, buffers, world_space=self._world_space)
         except InterruptedError:
             output.Initialize()  # aborted on request (AbortExecuteOn): not an error
+            self.SetAbortExecute(0)  # VTK leaves the flag on; the next update runs again
         except Exception as error:  # noqa: BLE001 - reported to VTK and re-raised by Update()
             output.Initialize()
             return self._report(error)

@@ -31,7 +31,8 @@ def image_geometry(camera: Camera | None, world_space: bool) -> tuple[np.ndarray
 
 def fill_image(image: vtkImageData, camera: Camera, buffers: dict[str, np.ndarray], *, world_space: bool = False) -> vtkImageData:
     """Sets ``image`` to ``camera``'s pixel grid and adds ``buffers`` as point arrays (shared,
-    not copied)."""
+    not copied). ``Depth`` (else the first array) becomes the active scalars, which VTK's
+    image filters work on."""
     origin, spacing, direction = image_geometry(camera, world_space)
     image.SetDimensions(camera.nx, camera.ny, 1)
     image.SetOrigin(*origin)
@@ -42,4 +43,6 @@ def fill_image(image: vtkImageData, camera: Camera, buffers: dict[str, np.ndarra
         array = numpy_to_vtk(np.ascontiguousarray(values), deep=False)
         array.SetName(name)
         point_data.AddArray(array)
+    if buffers:
+        point_data.SetActiveScalars("Depth" if "Depth" in buffers else next(iter(buffers)))
     return image
