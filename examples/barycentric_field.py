@@ -39,7 +39,11 @@ def main(argv: list[str] | None = None) -> None:
 
     mesh = pv.examples.load_ant()  # 912 triangles: large enough to see each one
     nx, ny = 640, 480
-    cam = vrc.Camera.framing(mesh.bounds, view="iso", nx=nx, ny=ny)
+    # The seed's camera model: an eye, the point it looks at, the up direction, and a
+    # window given by a vertical view angle (h = 2 d tan(angle / 2), w = h nx / ny).
+    centre, radius = np.array(mesh.center) - (0.0, 2.0, 0.0), mesh.length / 2  # legs hang down
+    side = np.array([-1.0, 0.7, 0.4]) / np.linalg.norm([-1.0, 0.7, 0.4])
+    cam = vrc.Camera(centre + 2.7 * radius * side, centre, (0, 1, 0), view_angle=30, nx=nx, ny=ny)
     image = vrc.cast(mesh, cam, arrays=["TriangleId", "Barycentric"])
 
     tid = image["TriangleId"]
@@ -50,10 +54,10 @@ def main(argv: list[str] | None = None) -> None:
     assert np.all(np.abs(bary[hit].sum(axis=1) - 1.0) <= 1e-12), "weights do not sum to 1"
     assert np.all((bary[hit] >= -1e-12) & (bary[hit] <= 1.0 + 1e-12)), "a weight outside [0, 1]"
     assert np.isnan(bary[~hit]).all(), "a miss has weights"
-    # The camera frames the mesh's bounding sphere: the ant covers a good part of the
-    # picture but not all of it.
+    # The window is a little larger than the ant's bounding sphere, and an ant is mostly
+    # thin legs: it covers a twentieth to a half of the picture.
     coverage = hit.mean()
-    assert 0.05 < coverage < 0.8, f"implausible coverage {coverage:.3f}"
+    assert 0.05 < coverage < 0.5, f"implausible coverage {coverage:.3f}"
     # Every triangle that faces the camera somewhere should be seen by many pixels: the
     # ant's visible triangles, a sizeable fraction of the 912.
     seen = np.unique(tid[hit])
@@ -67,8 +71,10 @@ def main(argv: list[str] | None = None) -> None:
     triangles = mesh.regular_faces
     rng = np.random.default_rng(0)
     far = 10.0 * mesh.length
+    sample = rng.choice(nx * ny, size=400, replace=False)
+    expected_hits = int(hit[sample].sum())
     agree = compared = 0
-    for k in rng.choice(nx * ny, size=400, replace=False):
+    for k in sample:
         i, row = k % nx, k // nx  # row 0 is the bottom of the image
         direction = to_world @ cam.pixel_center(i, ny - 1 - row)  # the seed's P_ij, j from the top
         end = cam.eye + far * direction / np.linalg.norm(direction)
@@ -85,7 +91,7 @@ def main(argv: list[str] | None = None) -> None:
     # Pixels whose ray grazes an edge of the silhouette may go either way in VTK's
     # tolerance-based test; all others must agree.
     assert agree >= 0.98 * 400, f"hit/miss agrees with VTK on only {agree} of 400 rays"
-    assert compared >= 0.9 * hit[rng.choice(nx * ny, 0)].size + 0.3 * coverage * 400, "too few rays compared"
+    assert compared >= 0.9 * expected_hits, f"only {compared} of about {expected_hits:.0f} hit rays compared"
 
     # -- the picture ------------------------------------------------------------------
     rgb = np.full((nx * ny, 3), 0.12)

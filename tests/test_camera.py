@@ -152,3 +152,29 @@ def test_framing_keeps_the_whole_box_in_view(view):
     assert (depth > 0).all()
     assert (np.abs(x / depth * cam.d) <= cam.w / 2).all()
     assert (np.abs(y / depth * cam.d) <= cam.h / 2).all()
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_cast_through_a_plotter_overlays_its_screenshot(parallel):
+    """vrc.cast(mesh, plotter) uses the plotter's camera and window size: its hit mask
+    matches the plotter's own depth image (rows top first) on at least 99% of pixels."""
+    import pyvista as pv
+
+    mesh = pv.examples.load_airplane()
+    plotter = pv.Plotter(off_screen=True, window_size=(240, 160))
+    plotter.add_mesh(mesh)
+    plotter.camera_position = "xy" if parallel else "iso"
+    plotter.enable_parallel_projection() if parallel else None
+    plotter.camera.azimuth = 20
+    plotter.screenshot()
+    covered = np.isfinite(plotter.get_image_depth())
+    image = vrc.cast(mesh, plotter, arrays=["vtkValidPointMask"])
+    assert image.dimensions == (240, 160, 1)
+    ours = image["vtkValidPointMask"].reshape(160, 240)[::-1].astype(bool)
+    agreement = np.mean(ours == covered)
+    plotter.close()
+    iou = np.sum(ours & covered) / np.sum(ours | covered)
+    print(f"coverage {covered.mean():.3f}, agreement {agreement:.4f}, IoU {iou:.4f}")
+    assert covered.mean() > 0.02
+    assert agreement >= 0.99, agreement
+    assert iou > 0.9, iou  # the mask is thin: also compare on the covered pixels alone

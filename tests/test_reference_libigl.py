@@ -79,7 +79,9 @@ def camera_rays(cam: vrc.Camera) -> tuple[np.ndarray, np.ndarray]:
     return origins, np.ascontiguousarray(directions)
 
 
-def random_cameras(ref: Reference, seed: int, n: int = 3, nx: int = 160, ny: int = 120) -> list[vrc.Camera]:
+def random_cameras(
+    ref: Reference, seed: int, n: int = 3, nx: int = 160, ny: int = 120
+) -> list[vrc.Camera]:
     """Perspective cameras with the eye on a sphere of 1.5-3 mesh radii, looking near the centre."""
     rng = np.random.default_rng(seed)
     cams = []
@@ -88,7 +90,15 @@ def random_cameras(ref: Reference, seed: int, n: int = 3, nx: int = 160, ny: int
         eye = ref.center + u / np.linalg.norm(u) * ref.radius * rng.uniform(1.5, 3.0)
         look = ref.center + rng.uniform(-0.1, 0.1, 3) * ref.radius
         cams.append(
-            vrc.Camera(eye, look, rng.normal(size=3), d=rng.uniform(0.5, 2.0), view_angle=rng.uniform(25, 50), nx=nx, ny=ny)
+            vrc.Camera(
+                eye,
+                look,
+                rng.normal(size=3),
+                d=rng.uniform(0.5, 2.0),
+                view_angle=rng.uniform(25, 50),
+                nx=nx,
+                ny=ny,
+            )
         )
     return cams
 
@@ -103,7 +113,11 @@ def line_meets_triangle(o: np.ndarray, p: np.ndarray, P: np.ndarray) -> np.ndarr
     (o, p, c, a) do not have opposite orientations (zero = on an edge counts as meeting)."""
     o, p = np.ascontiguousarray(o, dtype=np.float64), np.ascontiguousarray(p, dtype=np.float64)
     s = np.stack(
-        [orient3d(o, p, np.ascontiguousarray(P[:, e]), np.ascontiguousarray(P[:, (e + 1) % 3])) for e in range(3)], -1
+        [
+            orient3d(o, p, np.ascontiguousarray(P[:, e]), np.ascontiguousarray(P[:, (e + 1) % 3]))
+            for e in range(3)
+        ],
+        -1,
     )
     return ~((s > 0).any(-1) & (s < 0).any(-1)) & (s != 0).any(-1)
 
@@ -198,7 +212,9 @@ def explain_disagreements(ref: Reference, o, d, ours, theirs, delta):
             continue
         P = ref.V[ref.F[ids[h, side]]]
         t[h, side] = plane_t(o[h], d[h], P)
-        meets[h, side], near[h, side] = edge_certificates(o[h], d[h], t[h, side], P, np.full(h.size, delta))
+        meets[h, side], near[h, side] = edge_certificates(
+            o[h], d[h], t[h, side], P, np.full(h.size, delta)
+        )
     nearer = np.argmin(t, 1)
     edge = near[np.arange(m), nearer]
     both = (ids >= 0).all(1)
@@ -208,7 +224,13 @@ def explain_disagreements(ref: Reference, o, d, ours, theirs, delta):
         if not meets[k].all():
             out.append(None)
         elif edge[k]:
-            out.append("edge (silhouette)" if not both[k] else "edge (shared)" if tie[k] else "edge (occluding)")
+            out.append(
+                "edge (silhouette)"
+                if not both[k]
+                else "edge (shared)"
+                if tie[k]
+                else "edge (occluding)"
+            )
         elif tie[k]:
             out.append("depth tie")
         else:
@@ -222,14 +244,19 @@ def compare_ids(ref, o, d, ours, theirs, label):
     same = ours == theirs
     same_hit = (ours >= 0) == (theirs >= 0)
     bad = np.flatnonzero(~same)
-    kinds = explain_disagreements(ref, o[bad], d[bad], ours[bad], theirs[bad], DELTA_REL * ref.radius)
+    kinds = explain_disagreements(
+        ref, o[bad], d[bad], ours[bad], theirs[bad], DELTA_REL * ref.radius
+    )
     tally = Counter(k or "UNEXPLAINED" for k in kinds)
     print(
-        f"\n[libigl {label} {ref.name}] {n} rays, hits {np.mean(ours >= 0):.3f}: TriangleId agreement "
-        f"{same.mean():.5%} ({bad.size} differ: {dict(tally)}), hit/miss agreement {same_hit.mean():.5%}"
+        f"\n[libigl {label} {ref.name}] {n} rays, hits {np.mean(ours >= 0):.3f}: "
+        f"TriangleId agreement {same.mean():.5%} ({bad.size} differ: {dict(tally)}), "
+        f"hit/miss agreement {same_hit.mean():.5%}"
     )
     unexplained = [int(i) for i, k in zip(bad, kinds) if k is None]
-    assert not unexplained, f"rays {unexplained[:10]}: ours {ours[unexplained[:10]]}, libigl {theirs[unexplained[:10]]}"
+    assert not unexplained, (
+        f"rays {unexplained[:10]}: ours {ours[unexplained[:10]]}, libigl {theirs[unexplained[:10]]}"
+    )
     return same.mean(), same_hit.mean()
 
 
@@ -250,7 +277,7 @@ def test_libigl_returns_float32_rounded_t_and_uv():
     assert uv[0].tolist() == [np.float32(0.1), np.float32(0.3)]
     ours = vrc.Scene(pv.PolyData(V, faces=[3, 0, 1, 2])).intersect(o, [[0.0, 0, -1]])
     np.testing.assert_allclose(ours["barycentric"][0], [0.6, 0.1, 0.3], rtol=0, atol=1e-15)
-    assert ours["t"][0] == np.pi
+    assert ours["t"][0] == pytest.approx(np.pi, rel=1e-15)
 
 
 def test_camera_rays_match_libigl(ref):
@@ -280,7 +307,10 @@ def test_camera_depth_matches_libigl(ref):
         worst = max(worst, float(err.max()))
         assert (err <= F32_ROUND + F64_SLACK).all(), err.max()
         assert np.isnan(image["Depth"][image["TriangleId"] < 0]).all()
-    print(f"\n[libigl depth {ref.name}] max relative |Depth/d - t_igl| = {worst:.3e} (float32 half-ulp {F32_ROUND:.3e})")
+    print(
+        f"\n[libigl depth {ref.name}] max relative |Depth/d - t_igl| = {worst:.3e} "
+        f"(float32 half-ulp {F32_ROUND:.3e})"
+    )
 
 
 def test_barycentric_sums_to_one_and_reproduces_the_hit_point(ref):
@@ -303,7 +333,9 @@ def test_barycentric_sums_to_one_and_reproduces_the_hit_point(ref):
         err = np.linalg.norm(from_weights - from_ray, axis=1).max() / ref.radius
         worst_point = max(worst_point, err)
         assert err <= 1e-9
-        np.testing.assert_allclose(image["Position"][hit], from_weights, rtol=0, atol=1e-12 * ref.radius)
+        np.testing.assert_allclose(
+            image["Position"][hit], from_weights, rtol=0, atol=1e-12 * ref.radius
+        )
         theirs, _, uv = ref.igl(o, d)
         same = theirs[hit] == tri[hit]
         igl_w = np.column_stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]])[hit][same]
@@ -336,7 +368,9 @@ def test_intersect_random_rays_matches_libigl(ref):
     igl_w = np.column_stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]])
     assert np.abs(ours["barycentric"][both] - igl_w[both]).max() <= F32_ROUND + F64_SLACK
     tid = ours["triangle_id"]
-    np.testing.assert_array_equal(ours["cell_id"], np.where(tid >= 0, ref.scene.prepared.cell_ids[tid], -1))
+    np.testing.assert_array_equal(
+        ours["cell_id"], np.where(tid >= 0, ref.scene.prepared.cell_ids[tid], -1)
+    )
     miss = ours["triangle_id"] < 0
     assert np.isnan(ours["t"][miss]).all() and np.isnan(ours["barycentric"][miss]).all()
     print(f"[libigl random rays {ref.name}] max relative |t - t_igl| = {err.max():.3e}")
@@ -351,7 +385,9 @@ def test_rays_through_vertices_and_edges(ref):
     rng = np.random.default_rng(5000 + len(ref.name))
     n = 20000
     u = rng.normal(size=(n, 3))
-    o = ref.center + u / np.linalg.norm(u, axis=1, keepdims=True) * ref.radius * rng.uniform(1.5, 3.0, (n, 1))
+    o = ref.center + u / np.linalg.norm(u, axis=1, keepdims=True) * ref.radius * rng.uniform(
+        1.5, 3.0, (n, 1)
+    )
     tri = rng.integers(0, len(ref.F), n)
     e = rng.integers(0, 3, n)
     a, b = ref.V[ref.F[tri, e]], ref.V[ref.F[tri, (e + 1) % 3]]
@@ -381,10 +417,20 @@ def test_certificate_rejects_wrong_answers(ref):
     for k, f in enumerate(ref.F):
         for e in range(3):
             edges.setdefault(frozenset((int(f[e]), int(f[(e + 1) % 3]))), []).append(k)
-    neighbour = np.array([
-        next((k for e in range(3) for k in edges[frozenset((int(ref.F[t, e]), int(ref.F[t, (e + 1) % 3])))] if k != t), -1)
-        for t in tri
-    ])
+    neighbour = np.array(
+        [
+            next(
+                (
+                    k
+                    for e in range(3)
+                    for k in edges[frozenset((int(ref.F[t, e]), int(ref.F[t, (e + 1) % 3])))]
+                    if k != t
+                ),
+                -1,
+            )
+            for t in tri
+        ]
+    )
     delta = DELTA_REL * ref.radius
     right = explain_disagreements(ref, o, d, tri, tri, delta)
     wrong_neighbour = explain_disagreements(ref, o, d, neighbour, tri, delta)
@@ -401,12 +447,17 @@ def test_scene_cast_equals_cast(ref):
         b = vrc.cast(ref.mesh, cam)
         assert a.dimensions == b.dimensions == (cam.nx, cam.ny, 1)
         assert list(a.point_data.keys()) == list(b.point_data.keys())
-        assert {"TriangleId", "CellId", "Barycentric", "Depth", "vtkValidPointMask"} <= set(a.point_data.keys())
-        for name in a.point_data.keys():
+        assert {"TriangleId", "CellId", "Barycentric", "Depth", "vtkValidPointMask"} <= set(
+            a.point_data.keys()
+        )
+        for name in a.point_data:
             assert a[name].dtype == b[name].dtype, name
             np.testing.assert_array_equal(a[name], b[name], err_msg=name)
         assert (a["vtkValidPointMask"] == (a["TriangleId"] >= 0)).all()
-        np.testing.assert_array_equal(a["CellId"], np.where(a["TriangleId"] >= 0, ref.scene.prepared.cell_ids[a["TriangleId"]], -1))
+        np.testing.assert_array_equal(
+            a["CellId"],
+            np.where(a["TriangleId"] >= 0, ref.scene.prepared.cell_ids[a["TriangleId"]], -1),
+        )
 
 
 def _c(x: np.ndarray) -> np.ndarray:
@@ -414,7 +465,7 @@ def _c(x: np.ndarray) -> np.ndarray:
 
 
 def exact_difference(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``a - b`` and, per row, whether it was computed without rounding (Knuth's TwoSum error is 0)."""
+    """``a - b`` and, per row, whether it was exact (the error term of Knuth's TwoSum is 0)."""
     s = a - b
     bb = s - a
     err = (a - (s - bb)) + (-b - bb)
@@ -426,7 +477,9 @@ def grid_eyes(ref: Reference, rng: np.random.Generator, n: int) -> np.ndarray:
     for the float32-born mesh coordinates: the ray's line then passes exactly through the target."""
     u = rng.normal(size=(n, 3))
     grid = 2.0 ** np.floor(np.log2(ref.radius / 64))
-    eyes = ref.center + u / np.linalg.norm(u, axis=1, keepdims=True) * ref.radius * rng.uniform(1.5, 3.0, (n, 1))
+    eyes = ref.center + u / np.linalg.norm(u, axis=1, keepdims=True) * ref.radius * rng.uniform(
+        1.5, 3.0, (n, 1)
+    )
     return np.round(eyes / grid) * grid
 
 
@@ -453,7 +506,9 @@ def test_no_leaks_where_the_surface_closes_around_the_ray(ref):
     k = rng.integers(0, pair.size, n)
     a, b = V[half[pair[k], 0]], V[half[pair[k], 1]]
     o_edge = grid_eyes(ref, rng, n)
-    d_edge, exact_edge = exact_difference((a + b) * 0.5, o_edge)  # (a + b) / 2 is exact for float32 inputs
+    d_edge, exact_edge = exact_difference(
+        (a + b) * 0.5, o_edge
+    )  # (a + b) / 2 is exact for float32 inputs
     side1 = orient3d(_c(o_edge), _c(a), _c(b), _c(V[half[pair[k], 2]]))
     side2 = orient3d(_c(o_edge), _c(a), _c(b), _c(V[half[pair[k] + 1, 2]]))
     closes_edge = exact_edge & (side1 * side2 < 0)
@@ -477,15 +532,21 @@ def test_no_leaks_where_the_surface_closes_around_the_ray(ref):
     closes_vert = exact_vert & same_sign
 
     assert exact_edge.mean() > 0.99 and exact_vert.mean() > 0.99
-    for label, o, d, closes in (("edges", o_edge, d_edge, closes_edge), ("vertices", o_vert, d_vert, closes_vert)):
-        assert closes.sum() > n // 4, "too few rays where the surface provably closes: the test would be vacuous"
+    for label, o, d, closes in (
+        ("edges", o_edge, d_edge, closes_edge),
+        ("vertices", o_vert, d_vert, closes_vert),
+    ):
+        assert closes.sum() > n // 4, (
+            "too few rays where the surface provably closes: the test would be vacuous"
+        )
         o, d = o[closes], d[closes]
         hits = ref.scene.intersect(o, d)
         leak = (hits["triangle_id"] < 0) | ~(hits["t"] <= 1.0 + 1e-12)
         theirs, t_igl, _ = ref.igl(o, d)
         igl_leak = (theirs < 0) | ~(t_igl <= 1.0 + 1e-6)
         print(
-            f"\n[exact watertightness {ref.name}] {closes.sum()} rays exactly through closed {label}: "
+            f"\n[exact watertightness {ref.name}] {closes.sum()} rays exactly through "
+            f"closed {label}: "
             f"vtkraycast leaks {leak.sum()}, libigl leaks {igl_leak.sum()}"
         )
         assert not leak.any(), f"leaks through {label}: rays {np.flatnonzero(leak)[:10]}"

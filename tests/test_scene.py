@@ -200,3 +200,50 @@ def test_the_scene_keeps_its_own_copy_of_the_mesh():
     mesh.points[:] *= 3.0
     after = scene.intersect([[0, 0, 5]], [[0, 0, -1]])
     assert before["t"][0] == after["t"][0]
+
+
+def test_back_face_culling_keeps_front_faces_only(sphere, scene):
+    outside = scene.cast(camera(), arrays=["TriangleId"])
+    culled = scene.cast(camera(), arrays=["TriangleId"], backface_culling=True)
+    np.testing.assert_array_equal(outside["TriangleId"], culled["TriangleId"])  # closed, outward normals
+    inside = vrc.Camera((0, 0, 0.2), (0, 0, -1), (0, 1, 0), nx=32, ny=32)
+    assert (scene.cast(inside, arrays=["TriangleId"])["TriangleId"] >= 0).all()
+    assert (scene.cast(inside, arrays=["TriangleId"], backface_culling=True)["TriangleId"] == -1).all()
+    flipped = sphere.copy()
+    flipped.flip_faces(inplace=True)
+    assert (vrc.cast(flipped, inside, arrays=["TriangleId"], backface_culling=True)["TriangleId"] >= 0).all()
+
+
+def test_progress_bar(capsys):
+    scene = vrc.Scene(pv.Sphere(theta_resolution=200, phi_resolution=200))
+    scene.cast(camera(nx=1200, ny=1200), arrays=["TriangleId"], progress_bar=True, threads=1)
+    err = capsys.readouterr().err
+    assert "Ray casting 1200x1200" in err and "100%" in err
+
+
+def test_ctrl_c_stops_a_cast_and_leaves_the_scene_usable(tmp_path):
+    """SIGINT during a long cast raises KeyboardInterrupt between tiles; the scene then
+    casts normally."""
+    import subprocess
+    import sys
+
+    code = (
+        "import os, signal, threading, time, pyvista as pv, vtkraycast as vrc\n"
+        "scene = vrc.Scene(pv.Sphere(theta_resolution=400, phi_resolution=400))\n"
+        "cam = vrc.Camera((0, 0, 3), (0, 0, 0), (0, 1, 0), nx=6000, ny=6000)\n"
+        "threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT)).start()\n"
+        "start = time.perf_counter()\n"
+        "try:\n"
+        "    scene.cast(cam, arrays=['TriangleId'], threads=1)\n"
+        "    print('finished')\n"
+        "except KeyboardInterrupt:\n"
+        "    print('interrupted after', round(time.perf_counter() - start, 2))\n"
+        "small = scene.cast(cam.replace(nx=8, ny=8), arrays=['TriangleId'])\n"
+        "print('usable', int((small['TriangleId'] >= 0).sum()))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.split("\n")
+    assert lines[0].startswith("interrupted after"), done.stdout
+    assert float(lines[0].split()[-1]) < 2.0
+    assert lines[1].startswith("usable") and int(lines[1].split()[1]) > 0
