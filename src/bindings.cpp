@@ -14,6 +14,9 @@
 
 #include "bvh.hpp"
 #include "camera_rays.hpp"
+#include "kernel_cramer.hpp"
+#include "kernel_moller_trumbore.hpp"
+#include "kernel_plane.hpp"
 #include "kernel_watertight.hpp"
 #include "render.hpp"
 
@@ -57,25 +60,48 @@ struct PythonPoll {
     }
 };
 
-enum class Strategy { Watertight };
+enum class Strategy { Watertight, Plane, Cramer, MollerTrumbore };
 
 Strategy parse_strategy(const std::string& name) {
     if (name == "watertight") return Strategy::Watertight;
+    if (name == "plane") return Strategy::Plane;
+    if (name == "cramer") return Strategy::Cramer;
+    if (name == "moller-trumbore") return Strategy::MollerTrumbore;
     throw std::invalid_argument("unknown strategy '" + name + "'");
 }
 
+bool parse_accel(const std::string& name) {
+    if (name == "bvh") return false;
+    if (name == "none") return true;
+    throw std::invalid_argument("unknown accel '" + name + "'");
+}
+
+template <template <class> class Kernel, class Real, class Rays>
+bool render_with(const vrc::Scene& scene, const Rays& rays, bool brute_force, const vrc::Outputs<Real>& out, bool cull,
+                 unsigned threads, const vrc::Poll& poll) {
+    return brute_force ? vrc::render<Kernel, Real, true>(scene, rays, out, cull, threads, poll)
+                       : vrc::render<Kernel, Real, false>(scene, rays, out, cull, threads, poll);
+}
+
 template <class Real, class Rays>
-bool dispatch(const vrc::Scene& scene, const Rays& rays, Strategy strategy, const vrc::Outputs<Real>& out, bool cull,
-              unsigned threads, const vrc::Poll& poll) {
+bool dispatch(const vrc::Scene& scene, const Rays& rays, Strategy strategy, bool brute_force,
+              const vrc::Outputs<Real>& out, bool cull, unsigned threads, const vrc::Poll& poll) {
     switch (strategy) {
         case Strategy::Watertight:
-            return vrc::render<vrc::Watertight, Real>(scene, rays, out, cull, threads, poll);
+            return render_with<vrc::Watertight, Real>(scene, rays, brute_force, out, cull, threads, poll);
+        case Strategy::Plane:
+            return render_with<vrc::SeedPlane, Real>(scene, rays, brute_force, out, cull, threads, poll);
+        case Strategy::Cramer:
+            return render_with<vrc::SeedCramer, Real>(scene, rays, brute_force, out, cull, threads, poll);
+        case Strategy::MollerTrumbore:
+            return render_with<vrc::MollerTrumbore, Real>(scene, rays, brute_force, out, cull, threads, poll);
     }
     throw std::logic_error("unhandled strategy");
 }
 
 template <class Real, class Rays>
-bool run(const vrc::Scene& scene, const Rays& rays, const std::string& strategy, bool cull, IdsOut triangle_id,
+bool run(const vrc::Scene& scene, const Rays& rays, const std::string& strategy, const std::string& accel, bool cull,
+         IdsOut triangle_id,
          std::optional<ValuesOut<Real>> depth, std::optional<TriplesOut<Real>> barycentric, int threads,
          std::optional<nb::callable> progress) {
     const std::size_t n = rays.size();
@@ -84,12 +110,13 @@ bool run(const vrc::Scene& scene, const Rays& rays, const std::string& strategy,
     const vrc::Outputs<Real> out{triangle_id.data(), depth ? depth->data() : nullptr,
                                  barycentric ? barycentric->data() : nullptr};
     const Strategy s = parse_strategy(strategy);
+    const bool brute_force = parse_accel(accel);
     const unsigned n_threads = resolve_threads(threads);
     PythonPoll poll{std::move(progress)};
     bool completed;
     {
         nb::gil_scoped_release release;
-        completed = dispatch<Real>(scene, rays, s, out, cull, n_threads, std::ref(poll));
+        completed = dispatch<Real>(scene, rays, s, brute_force, out, cull, n_threads, std::ref(poll));
     }
     if (poll.raised) throw nb::python_error();
     return completed;
@@ -101,7 +128,7 @@ void bind_precision(nb::module_& m) {
         "cast_camera",
         [](const vrc::Scene& scene, nb::ndarray<const double, nb::shape<4, 3>, nb::c_contig> frame, double d,
            double width, double height, double near, double far, int64_t nx, int64_t ny, bool parallel,
-           const std::string& strategy, bool backface_culling, IdsOut triangle_id,
+           const std::string& strategy, const std::string& accel, bool backface_culling, IdsOut triangle_id,
            std::optional<ValuesOut<Real>> depth, std::optional<TriplesOut<Real>> barycentric, int threads,
            std::optional<nb::callable> progress) {
             vrc::CameraSpec spec{};
@@ -119,24 +146,27 @@ void bind_precision(nb::module_& m) {
             spec.nx = nx;
             spec.ny = ny;
             spec.parallel = parallel;
-            return run<Real>(scene, vrc::CameraRays(spec), strategy, backface_culling, triangle_id, depth,
+            return run<Real>(scene, vrc::CameraRays(spec), strategy, accel, backface_culling, triangle_id, depth,
                              barycentric, threads, std::move(progress));
         },
         "scene"_a, "frame"_a, "d"_a, "width"_a, "height"_a, "near"_a, "far"_a, "nx"_a, "ny"_a, "parallel"_a,
-        "strategy"_a, "backface_culling"_a, "triangle_id"_a, "depth"_a.none(), "barycentric"_a.none(), "threads"_a,
+        "strategy"_a, "accel"_a, "backface_culling"_a, "triangle_id"_a, "depth"_a.none(), "barycentric"_a.none(), "threads"_a,
         "progress"_a.none(),
         "Casts one ray per pixel of a camera (frame rows: eye, right, up, backward). Returns False if aborted.");
     m.def(
         "cast_rays",
         [](const vrc::Scene& scene, Points origins, Points directions, double tmin, double tmax,
-           const std::string& strategy, bool backface_culling, IdsOut triangle_id, std::optional<ValuesOut<Real>> t,
+           const std::string& strategy, const std::string& accel, bool backface_culling, IdsOut triangle_id,
+           std::optional<ValuesOut<Real>> t,
            std::optional<TriplesOut<Real>> barycentric, int threads, std::optional<nb::callable> progress) {
             if (origins.shape(0) != directions.shape(0))
                 throw std::invalid_argument("origins and directions must have the same number of rows");
             return run<Real>(scene, vrc::ArrayRays(origins.data(), directions.data(), origins.shape(0), tmin, tmax),
-                             strategy, backface_culling, triangle_id, t, barycentric, threads, std::move(progress));
+                             strategy, accel, backface_culling, triangle_id, t, barycentric, threads,
+                             std::move(progress));
         },
-        "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "strategy"_a, "backface_culling"_a, "triangle_id"_a, "t"_a.none(),
+        "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "strategy"_a, "accel"_a, "backface_culling"_a,
+        "triangle_id"_a, "t"_a.none(),
         "barycentric"_a.none(), "threads"_a, "progress"_a.none(),
         "Casts arbitrary rays ((n, 3) origins and directions). Returns False if aborted.");
 }

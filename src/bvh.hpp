@@ -28,6 +28,8 @@ struct Scene {
     std::vector<uint32_t> prim_ids;   ///< leaf-order position -> input triangle index
     std::vector<Node> nodes;          ///< nodes[0] is the root; empty when there are no triangles
     Box bounds;                       ///< box of all triangles (rounded outward)
+    double sphere_center[3] = {0, 0, 0};  ///< the seed's bounding sphere: box centre...
+    double sphere_radius = -1;            ///< ...and largest point distance to it (-1: empty)
 
     [[nodiscard]] std::size_t n_triangles() const { return prim_ids.size(); }
     [[nodiscard]] const double* point(uint32_t i) const { return points.data() + 3 * std::size_t(i); }

@@ -166,6 +166,15 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     scene.nodes.resize(builder.next_node.load());
     scene.nodes.shrink_to_fit();
     scene.bounds = scene.nodes[0].box;
+    double r2 = 0;
+    for (int k = 0; k < 3; ++k) scene.sphere_center[k] = 0.5 * (double(scene.bounds.lo[k]) + double(scene.bounds.hi[k]));
+    for (std::size_t i = 0; i < 3 * n_triangles; ++i) {
+        const double* p = points + 3 * std::size_t(triangles[i]);
+        double d2 = 0;
+        for (int k = 0; k < 3; ++k) d2 += (p[k] - scene.sphere_center[k]) * (p[k] - scene.sphere_center[k]);
+        r2 = std::max(r2, d2);
+    }
+    scene.sphere_radius = std::sqrt(r2);
 
     scene.prim_ids.resize(n_triangles);
     scene.triangles.resize(3 * n_triangles);

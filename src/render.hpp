@@ -30,10 +30,11 @@ struct Outputs {
 /// returning false aborts the cast between tiles.
 using Poll = std::function<bool(std::size_t, std::size_t)>;
 
-/// Casts every ray of `rays`, tiles shared among `threads` workers, optionally skipping
+/// Casts every ray of `rays`, tiles shared among `threads` workers, through the BVH (or,
+/// with kBruteForce, the seed's sphere-box-every-triangle method), optionally skipping
 /// triangles that face away from the ray. Returns false when
 /// `poll` aborted the cast (outputs then partly written).
-template <template <class> class Kernel, class Real, class Rays>
+template <template <class> class Kernel, class Real, bool kBruteForce, class Rays>
 bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, bool cull_back_faces, unsigned threads,
             const Poll& poll) {
     const std::size_t n_tiles = rays.n_tiles();
@@ -46,7 +47,9 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, bool
     auto work = [&] {
         for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
             rays.for_each_in_tile(tile, [&](std::size_t k) {
-                const Hit<Real> hit = closest_hit<Kernel, Real>(scene, rays.ray(k), cull_back_faces);
+                const Ray ray = rays.ray(k);
+                const Hit<Real> hit = kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, cull_back_faces)
+                                                  : closest_hit<Kernel, Real>(scene, ray, cull_back_faces);
                 const bool found = hit.found();
                 out.triangle_id[k] = found ? int64_t(scene.prim_ids[hit.prim]) : -1;
                 if (out.depth) out.depth[k] = found ? static_cast<Real>(rays.depth(hit.t)) : kNaN;

@@ -45,6 +45,49 @@ struct BoxTester {
     }
 };
 
+/// Conservative ray-sphere test: false only when the ray's line passes farther than the
+/// radius (with a relative margin far above rounding) from the centre, or the sphere lies
+/// wholly outside [tmin, tmax].
+inline bool may_hit_sphere(const Scene& scene, const Ray& ray) {
+    if (scene.sphere_radius < 0) return false;
+    double oc[3], dd = 0, od = 0, oo = 0;
+    for (int k = 0; k < 3; ++k) {
+        oc[k] = scene.sphere_center[k] - ray.org[k];
+        dd += ray.dir[k] * ray.dir[k];
+        od += oc[k] * ray.dir[k];
+        oo += oc[k] * oc[k];
+    }
+    const double r = scene.sphere_radius * (1 + 1e-9) + 1e-300;
+    const double tc = od / dd;                // parameter of the point closest to the centre
+    const double miss2 = oo - tc * tc * dd;   // squared distance of the line from the centre
+    if (miss2 > r * r * (1 + 1e-9)) return false;
+    const double half = std::sqrt(r * r / dd) * (1 + 1e-9);  // parameter half-width of the chord, over-estimated
+    return tc + half >= ray.tmin && tc - half <= ray.tmax;
+}
+
+/// The seed lecture's method (accel = "none"): the whole model's bounding sphere, then its
+/// bounding box, then every triangle. Ties go to the lowest input triangle index, as below.
+template <template <class> class Kernel, class Real>
+Hit<Real> brute_force_hit(const Scene& scene, const Ray& ray, bool cull_back_faces) {
+    Hit<Real> hit;
+    if (!may_hit_sphere(scene, ray)) return hit;
+    if (BoxTester(ray).enter(scene.bounds, ray.tmin, ray.tmax) == std::numeric_limits<double>::infinity()) return hit;
+    const Kernel<Real> kernel(ray, cull_back_faces);
+    double bound = ray.tmax;
+    for (uint32_t i = 0, n = uint32_t(scene.n_triangles()); i < n; ++i) {
+        const uint32_t* tri = scene.triangles.data() + 3 * std::size_t(i);
+        double t;
+        Real b[3];
+        if (kernel(scene.point(tri[0]), scene.point(tri[1]), scene.point(tri[2]), ray.tmin, bound, t, b) &&
+            (!hit.found() || t < hit.t || scene.prim_ids[i] < scene.prim_ids[hit.prim])) {
+            hit.t = bound = t;
+            hit.prim = i;
+            for (int c = 0; c < 3; ++c) hit.b[c] = b[c];
+        }
+    }
+    return hit;
+}
+
 /// Closest hit along `ray` with ray.tmin <= t <= ray.tmax. Equal `t` goes to the lowest
 /// input triangle index, so duplicates and coplanar overlaps have one deterministic winner.
 template <template <class> class Kernel, class Real>

@@ -300,7 +300,15 @@ class Camera:
         return cls(centre + distance * direction, centre, up, d=distance, view_angle=view_angle, nx=nx, ny=ny)
 
     def to_vtk(self) -> Any:
-        """An equivalent ``vtkCamera`` (position, focal point, view up, angle or scale, clipping range)."""
+        """An equivalent ``vtkCamera`` (position, focal point, view up, angle or scale, clipping range).
+
+        An unbounded depth range becomes the clipping range ``(1e-6 d, 1e30)``, which leaves
+        a z-buffer no precision: call the renderer's ``ResetCameraClippingRange()`` after
+        making it the active camera.
+        """
+        # Registers the OpenGL camera as vtkCamera's implementation; a plain vtkCamera made
+        # before that crashes VTK when a renderer draws with it.
+        import vtkmodules.vtkRenderingOpenGL2  # noqa: F401
         from vtkmodules.vtkRenderingCore import vtkCamera
 
         camera = vtkCamera()

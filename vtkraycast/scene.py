@@ -20,7 +20,8 @@ from .mesh import prepare_mesh
 __all__ = ["Scene", "STRATEGIES", "PRECISIONS"]
 
 #: Intersection strategies by name (DESIGN.md); "auto" picks the fastest exact one.
-STRATEGIES = ("auto", "watertight")
+STRATEGIES = ("auto", "watertight", "moller-trumbore", "plane", "cramer")
+ACCELS = ("bvh", "none")
 PRECISIONS = {"float64": np.float64, "float32": np.float32}
 #: Refuse images whose output arrays alone would exceed this many bytes.
 _MAX_OUTPUT_BYTES = int(os.environ.get("VTKRAYCAST_MAX_OUTPUT_BYTES", 16 * 2**30))
@@ -41,8 +42,8 @@ def _strategy(strategy: str) -> str:
 
 
 def _accel(accel: str) -> str:
-    if accel != "bvh":
-        raise ValueError(f"unknown accel {accel!r}; choose 'bvh'")
+    if accel not in ACCELS:
+        raise ValueError(f"unknown accel {accel!r}; choose 'bvh' or 'none'")
     return accel
 
 
@@ -132,7 +133,7 @@ class Scene:
         names = select_arrays(self._mesh, arrays, interpolate)
         real = _precision(precision)
         kernel = _strategy(strategy)
-        _accel(accel)
+        accel = _accel(accel)
         n_threads = _threads(threads)
         n = camera.nx * camera.ny
         per_ray = 8 + (1 + 3) * np.dtype(real).itemsize
@@ -148,7 +149,7 @@ class Scene:
         with progress_reporter(progress, progress_bar, f"Ray casting {camera.nx}x{camera.ny}") as poll:
             done = _core.cast_camera(
                 self._core, camera.frame, camera.d, camera.w, camera.h, camera.near, camera.far,
-                camera.nx, camera.ny, camera.parallel, kernel, bool(backface_culling),
+                camera.nx, camera.ny, camera.parallel, kernel, accel, bool(backface_culling),
                 triangle_id, depth, bary, n_threads, poll,
             )
         if not done:
@@ -168,11 +169,14 @@ class Scene:
             names). Default: all but ``Position`` and ``Normal``, plus the mesh's arrays
             when ``interpolate``. Work for arrays not asked for is not done.
         strategy : str, default: "auto"
-            Ray-triangle test; "auto" is the fastest exact one ("watertight").
+            Ray-triangle test: "watertight" (Woop, Benthin, Wald 2013),
+            "moller-trumbore" (1997), the seed's "plane" (Strategy I) and "cramer"
+            (Strategy II); "auto" is the fastest exact one.
         precision : {"float64", "float32"}
             Arithmetic of the intersection test and dtype of the floating outputs.
-        accel : {"bvh"}
-            Acceleration structure.
+        accel : {"bvh", "none"}
+            Acceleration structure; "none" is the seed's method (bounding sphere, then
+            box, then every triangle): slow, a reference, fine for tiny meshes.
         threads : int, optional
             Worker threads; all cores by default.
         backface_culling : bool, default: False
@@ -212,6 +216,7 @@ class Scene:
         tmax: float = math.inf,
         strategy: str = "auto",
         precision: str = "float64",
+        accel: str = "bvh",
         threads: int | None = None,
         backface_culling: bool = False,
     ) -> dict[str, np.ndarray]:
@@ -235,7 +240,7 @@ class Scene:
         t = np.empty(n, real)
         bary = np.empty((n, 3), real)
         _core.cast_rays(
-            self._core, o, d, tmin, tmax, _strategy(strategy), bool(backface_culling),
+            self._core, o, d, tmin, tmax, _strategy(strategy), _accel(accel), bool(backface_culling),
             triangle_id, t, bary, _threads(threads), None,
         )
         hits = compute_arrays(self._mesh, ["CellId"], triangle_id, t, bary)
