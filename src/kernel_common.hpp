@@ -1,7 +1,31 @@
-// Small helpers shared by the ray-triangle kernels.
+// What the ray-triangle kernels share: the cast context, the interface the traversal
+// calls, and small vector helpers.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
+
+#include "bvh.hpp"
+
 namespace vrc {
+
+/// Per-cast settings every kernel sees.
+struct CastContext {
+    bool cull_back_faces = false;
+};
+
+/// Base of the kernels that test a triangle from its three points: the traversal calls
+/// `test(scene, i, ...)` with the leaf-order triangle index, this fetches the points and
+/// calls the kernel's `operator()(pa, pb, pc, tmin, tmax, t, b)`.
+template <class Kernel>
+struct PointKernel {
+    template <class Real>
+    bool test(const Scene& scene, uint32_t i, double tmin, double tmax, double& t, Real b[3]) const {
+        const uint32_t* tri = scene.triangles.data() + 3 * std::size_t(i);
+        return static_cast<const Kernel&>(*this)(scene.point(tri[0]), scene.point(tri[1]), scene.point(tri[2]), tmin,
+                                                 tmax, t, b);
+    }
+};
 
 /// p - org computed in double, then rounded to Real: every kernel works in coordinates
 /// relative to the ray origin (the eye, for camera rays), whatever the world offset.

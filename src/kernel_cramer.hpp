@@ -13,10 +13,10 @@ namespace vrc {
 /// Inside when 0 <= l1, l2, l3 <= 1. A singular matrix (ray parallel to the plane) misses.
 /// det = d . n with n = (P2 - P1) x (P3 - P1), so front faces have det < 0.
 template <class Real>
-class SeedCramer {
+class SeedCramer : public PointKernel<SeedCramer<Real>> {
    public:
-    SeedCramer(const Ray& ray, bool cull_back_faces)
-        : org_(ray.org), cull_(cull_back_faces),
+    SeedCramer(const Ray& ray, const CastContext& context)
+        : org_(ray.org), cull_(context.cull_back_faces),
           dir_{Real(ray.dir[0]), Real(ray.dir[1]), Real(ray.dir[2])} {}
 
     bool operator()(const double* pa, const double* pb, const double* pc, double tmin, double tmax, double& t,

@@ -13,10 +13,10 @@ namespace vrc {
 /// edges from its own first vertex, so neighbours may disagree on a shared edge (leaks).
 /// det = -d . n, so front faces have det > 0.
 template <class Real>
-class MollerTrumbore {
+class MollerTrumbore : public PointKernel<MollerTrumbore<Real>> {
    public:
-    MollerTrumbore(const Ray& ray, bool cull_back_faces)
-        : org_(ray.org), cull_(cull_back_faces),
+    MollerTrumbore(const Ray& ray, const CastContext& context)
+        : org_(ray.org), cull_(context.cull_back_faces),
           dir_{Real(ray.dir[0]), Real(ray.dir[1]), Real(ray.dir[2])} {}
 
     bool operator()(const double* pa, const double* pb, const double* pc, double tmin, double tmax, double& t,

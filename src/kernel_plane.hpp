@@ -14,10 +14,10 @@ namespace vrc {
 /// outside both triangles sharing it, and rounding can put a point outside both, so the
 /// test is not watertight). The weights are the sub-triangle areas over the whole.
 template <class Real>
-class SeedPlane {
+class SeedPlane : public PointKernel<SeedPlane<Real>> {
    public:
-    SeedPlane(const Ray& ray, bool cull_back_faces)
-        : org_(ray.org), cull_(cull_back_faces),
+    SeedPlane(const Ray& ray, const CastContext& context)
+        : org_(ray.org), cull_(context.cull_back_faces),
           dir_{Real(ray.dir[0]), Real(ray.dir[1]), Real(ray.dir[2])} {}
 
     bool operator()(const double* pa, const double* pb, const double* pc, double tmin, double tmax, double& t,

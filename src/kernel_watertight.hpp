@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "geometry.hpp"
+#include "kernel_common.hpp"
 
 namespace vrc {
 
@@ -20,12 +21,12 @@ namespace vrc {
 /// (zero projected area) are never hit. With back-face culling, triangles whose normal
 /// (right-hand rule over their point order) points away from the ray origin are skipped.
 template <class Real>
-class Watertight {
+class Watertight : public PointKernel<Watertight<Real>> {
    public:
     /// Wider type used when an edge function is exactly 0.
     using Wide = std::conditional_t<std::is_same_v<Real, float>, double, long double>;
 
-    Watertight(const Ray& ray, bool cull_back_faces) : org_(ray.org), cull_(cull_back_faces) {
+    Watertight(const Ray& ray, const CastContext& context) : org_(ray.org), cull_(context.cull_back_faces) {
         kz_ = 0;
         for (int k = 1; k < 3; ++k)
             if (std::fabs(ray.dir[k]) > std::fabs(ray.dir[kz_])) kz_ = k;

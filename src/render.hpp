@@ -35,8 +35,8 @@ using Poll = std::function<bool(std::size_t, std::size_t)>;
 /// triangles that face away from the ray. Returns false when
 /// `poll` aborted the cast (outputs then partly written).
 template <template <class> class Kernel, class Real, bool kBruteForce, class Rays>
-bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, bool cull_back_faces, unsigned threads,
-            const Poll& poll) {
+bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, const CastContext& context,
+            unsigned threads, const Poll& poll) {
     const std::size_t n_tiles = rays.n_tiles();
     std::atomic<std::size_t> next{0}, done{0};
     std::atomic<bool> abort{false};
@@ -48,8 +48,8 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, bool
         for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
             rays.for_each_in_tile(tile, [&](std::size_t k) {
                 const Ray ray = rays.ray(k);
-                const Hit<Real> hit = kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, cull_back_faces)
-                                                  : closest_hit<Kernel, Real>(scene, ray, cull_back_faces);
+                const Hit<Real> hit = kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, context)
+                                                  : closest_hit<Kernel, Real>(scene, ray, context);
                 const bool found = hit.found();
                 out.triangle_id[k] = found ? int64_t(scene.prim_ids[hit.prim]) : -1;
                 if (out.depth) out.depth[k] = found ? static_cast<Real>(rays.depth(hit.t)) : kNaN;

@@ -8,6 +8,7 @@
 
 #include "bvh.hpp"
 #include "geometry.hpp"
+#include "kernel_common.hpp"
 
 namespace vrc {
 
@@ -68,17 +69,16 @@ inline bool may_hit_sphere(const Scene& scene, const Ray& ray) {
 /// The seed lecture's method (accel = "none"): the whole model's bounding sphere, then its
 /// bounding box, then every triangle. Ties go to the lowest input triangle index, as below.
 template <template <class> class Kernel, class Real>
-Hit<Real> brute_force_hit(const Scene& scene, const Ray& ray, bool cull_back_faces) {
+Hit<Real> brute_force_hit(const Scene& scene, const Ray& ray, const CastContext& context) {
     Hit<Real> hit;
     if (!may_hit_sphere(scene, ray)) return hit;
     if (BoxTester(ray).enter(scene.bounds, ray.tmin, ray.tmax) == std::numeric_limits<double>::infinity()) return hit;
-    const Kernel<Real> kernel(ray, cull_back_faces);
+    const Kernel<Real> kernel(ray, context);
     double bound = ray.tmax;
     for (uint32_t i = 0, n = uint32_t(scene.n_triangles()); i < n; ++i) {
-        const uint32_t* tri = scene.triangles.data() + 3 * std::size_t(i);
         double t;
         Real b[3];
-        if (kernel(scene.point(tri[0]), scene.point(tri[1]), scene.point(tri[2]), ray.tmin, bound, t, b) &&
+        if (kernel.test(scene, i, ray.tmin, bound, t, b) &&
             (!hit.found() || t < hit.t || scene.prim_ids[i] < scene.prim_ids[hit.prim])) {
             hit.t = bound = t;
             hit.prim = i;
@@ -91,12 +91,12 @@ Hit<Real> brute_force_hit(const Scene& scene, const Ray& ray, bool cull_back_fac
 /// Closest hit along `ray` with ray.tmin <= t <= ray.tmax. Equal `t` goes to the lowest
 /// input triangle index, so duplicates and coplanar overlaps have one deterministic winner.
 template <template <class> class Kernel, class Real>
-Hit<Real> closest_hit(const Scene& scene, const Ray& ray, bool cull_back_faces) {
+Hit<Real> closest_hit(const Scene& scene, const Ray& ray, const CastContext& context) {
     Hit<Real> hit;
     if (scene.nodes.empty()) return hit;
     const BoxTester boxes(ray);
     if (boxes.enter(scene.nodes[0].box, ray.tmin, ray.tmax) == std::numeric_limits<double>::infinity()) return hit;
-    const Kernel<Real> kernel(ray, cull_back_faces);
+    const Kernel<Real> kernel(ray, context);
     double bound = ray.tmax;
     struct Pending {
         uint32_t node;
@@ -108,10 +108,9 @@ Hit<Real> closest_hit(const Scene& scene, const Ray& ray, bool cull_back_faces) 
         const Node& node = scene.nodes[current];
         if (node.is_leaf()) {
             for (uint32_t i = node.index, end = node.index + node.count; i < end; ++i) {
-                const uint32_t* tri = scene.triangles.data() + 3 * std::size_t(i);
                 double t;
                 Real b[3];
-                if (kernel(scene.point(tri[0]), scene.point(tri[1]), scene.point(tri[2]), ray.tmin, bound, t, b) &&
+                if (kernel.test(scene, i, ray.tmin, bound, t, b) &&
                     (!hit.found() || t < hit.t || scene.prim_ids[i] < scene.prim_ids[hit.prim])) {
                     // the kernel already checked t <= bound = hit.t, so here t < hit.t or a tie
                     hit.t = bound = t;

@@ -38,7 +38,7 @@ def _threads(threads: int | None) -> int:
 def _strategy(strategy: str) -> str:
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
-    return "watertight" if strategy == "auto" else strategy
+    return strategy
 
 
 def _accel(accel: str) -> str:
