@@ -3,9 +3,11 @@
 #pragma once
 
 #include <cmath>
+#include <limits>
 #include <type_traits>
 #include <utility>
 
+#include "exact_sign.hpp"
 #include "geometry.hpp"
 #include "kernel_common.hpp"
 
@@ -14,19 +16,19 @@ namespace vrc {
 /// The ray is sheared so that it becomes the +z axis through the origin; the test is then
 /// 2D edge functions of the sheared vertices. Each edge function depends only on the
 /// edge's two vertices and the ray, and a shared edge evaluates to exactly the negated
-/// value in its neighbour, so no ray passes between triangles sharing an edge. An edge
-/// function that rounds to exactly 0 is re-evaluated in the next wider precision, for that
-/// edge alone, so the rule stays a function of the edge. A zero edge value counts as
-/// inside (both neighbours report the hit: a tie, never a leak). Degenerate triangles
+/// value in its neighbour, so no ray passes between triangles sharing an edge.
+/// Beyond the paper, an edge function whose magnitude is below its rounding-error bound
+/// takes the exact sign of the 3D orientation det[C - O, B - O, d] (Shewchuk expansions),
+/// so near an edge the side is decided exactly, not just consistently: the hit triangle is
+/// the exact one. A zero edge value counts as inside (both neighbours report the hit: a
+/// tie, never a leak). Degenerate triangles
 /// (zero projected area) are never hit. With back-face culling, triangles whose normal
 /// (right-hand rule over their point order) points away from the ray origin are skipped.
 template <class Real>
 class Watertight : public PointKernel<Watertight<Real>> {
    public:
-    /// Wider type used when an edge function is exactly 0.
-    using Wide = std::conditional_t<std::is_same_v<Real, float>, double, long double>;
-
-    Watertight(const Ray& ray, const CastContext& context) : org_(ray.org), cull_(context.cull_back_faces) {
+    Watertight(const Ray& ray, const CastContext& context)
+        : org_(ray.org), dir_(ray.dir), cull_(context.cull_back_faces) {
         kz_ = 0;
         for (int k = 1; k < 3; ++k)
             if (std::fabs(ray.dir[k]) > std::fabs(ray.dir[kz_])) kz_ = k;
@@ -36,9 +38,9 @@ class Watertight : public PointKernel<Watertight<Real>> {
         const double sx = ray.dir[kx_] / ray.dir[kz_], sy = ray.dir[ky_] / ray.dir[kz_];
         sx_ = static_cast<Real>(sx);
         sy_ = static_cast<Real>(sy);
+        sxd_ = sx;
+        syd_ = sy;
         sz_ = static_cast<Real>(1.0 / ray.dir[kz_]);
-        wsx_ = static_cast<Wide>(ray.dir[kx_]) / ray.dir[kz_];
-        wsy_ = static_cast<Wide>(ray.dir[ky_]) / ray.dir[kz_];
     }
 
     /// Intersects triangle (pa, pb, pc). On a hit with tmin <= t <= tmax returns true and
@@ -58,9 +60,12 @@ class Watertight : public PointKernel<Watertight<Real>> {
         Real u = cx * by - cy * bx;
         Real v = ax * cy - ay * cx;
         Real w = bx * ay - by * ax;
-        if (u == 0) u = static_cast<Real>(wide_edge(pc, pb));
-        if (v == 0) v = static_cast<Real>(wide_edge(pa, pc));
-        if (w == 0) w = static_cast<Real>(wide_edge(pb, pa));
+        // Magnitudes of the sheared coordinates, for the error bounds of the edge functions.
+        const Real mx[3] = {magnitude(a, kx_, sx_), magnitude(bb, kx_, sx_), magnitude(c, kx_, sx_)};
+        const Real my[3] = {magnitude(a, ky_, sy_), magnitude(bb, ky_, sy_), magnitude(c, ky_, sy_)};
+        u = exact_if_close(u, mx[2] * my[1] + my[2] * mx[1], pc, pb);
+        v = exact_if_close(v, mx[0] * my[2] + my[0] * mx[2], pa, pc);
+        w = exact_if_close(w, mx[1] * my[0] + my[1] * mx[0], pb, pa);
         if ((u < 0 || v < 0 || w < 0) && (u > 0 || v > 0 || w > 0)) return false;
         const Real det = u + v + w;  // > 0 when the triangle faces the ray origin
         if (det == 0 || (cull_ && det < 0)) return false;
@@ -76,23 +81,51 @@ class Watertight : public PointKernel<Watertight<Real>> {
     }
 
    private:
-    /// Edge function of (p, q) (the 2D cross product of the sheared p and q) in Wide.
-    [[nodiscard]] Wide wide_edge(const double* p, const double* q) const {
-        Wide pw[3], qw[3];
-        for (int k = 0; k < 3; ++k) {
-            pw[k] = static_cast<Wide>(p[k]) - org_[k];
-            qw[k] = static_cast<Wide>(q[k]) - org_[k];
+    /// |p_k| + |s p_z|: bounds the sheared coordinate p_k - s p_z and scales its error.
+    [[nodiscard]] Real magnitude(const Real p[3], int k, Real s) const {
+        return std::fabs(p[k]) + std::fabs(s * p[kz_]);
+    }
+
+    /// The edge function `e` of (p, q), or, when |e| is within its rounding-error bound,
+    /// `e` with the exact sign of det[p - O, q - O, d] (a zero when exactly on the edge).
+    /// Each sheared coordinate carries at most about 4 eps relative to its magnitude
+    /// (rounding of p - O to Real, of the shear and of its product and difference), so
+    /// |e - exact| <= ~10 eps * scale; 32 eps leaves a wide margin.
+    [[nodiscard]] Real exact_if_close(Real e, Real scale, const double* p, const double* q) const {
+        constexpr Real kBound = 32 * std::numeric_limits<Real>::epsilon() / 2;
+        if (std::fabs(e) > kBound * scale) return e;
+        const int sign = sign_of_edge(p, q);
+        if (sign == 0) return Real(0);
+        const Real size = e != 0 ? std::fabs(e) : std::numeric_limits<Real>::denorm_min();
+        return sign > 0 ? size : -size;
+    }
+
+    /// Sign of det[p - O, q - O, d]. A float kernel first tries double precision (far
+    /// cheaper than the expansions, and enough for all but a sliver of rays); the exact
+    /// orientation settles the rest.
+    [[nodiscard]] int sign_of_edge(const double* p, const double* q) const {
+        if constexpr (std::is_same_v<Real, float>) {
+            double pd[3], qd[3];
+            for (int k = 0; k < 3; ++k) {
+                pd[k] = p[k] - org_[k];
+                qd[k] = q[k] - org_[k];
+            }
+            const double px = pd[kx_] - sxd_ * pd[kz_], py = pd[ky_] - syd_ * pd[kz_];
+            const double qx = qd[kx_] - sxd_ * qd[kz_], qy = qd[ky_] - syd_ * qd[kz_];
+            const double e = px * qy - py * qx;
+            const double scale = (std::fabs(pd[kx_]) + std::fabs(sxd_ * pd[kz_])) * (std::fabs(qd[ky_]) + std::fabs(syd_ * qd[kz_])) +
+                                 (std::fabs(pd[ky_]) + std::fabs(syd_ * pd[kz_])) * (std::fabs(qd[kx_]) + std::fabs(sxd_ * qd[kz_]));
+            if (std::fabs(e) > 32 * (std::numeric_limits<double>::epsilon() / 2) * scale) return (e > 0) - (e < 0);
         }
-        const Wide px = pw[kx_] - wsx_ * pw[kz_], py = pw[ky_] - wsy_ * pw[kz_];
-        const Wide qx = qw[kx_] - wsx_ * qw[kz_], qy = qw[ky_] - wsy_ * qw[kz_];
-        return px * qy - py * qx;
+        return exact::orientation(p, q, org_, dir_);
     }
 
     const double* org_;
+    const double* dir_;
     bool cull_;
     int kx_, ky_, kz_;
     Real sx_, sy_, sz_;
-    Wide wsx_, wsy_;
+    double sxd_, syd_;
 };
 
 }  // namespace vrc
