@@ -22,11 +22,11 @@ import pathlib
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pyvista as pv  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pyvista as pv
 
-import vtkraycast as vrc  # noqa: E402
+import vtkraycast as vrc
 
 pv.OFF_SCREEN = True
 

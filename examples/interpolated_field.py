@@ -24,13 +24,13 @@ import pathlib
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pyvista as pv  # noqa: E402
-from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy  # noqa: E402
-from vtkmodules.vtkCommonCore import VTK_RGBA  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pyvista as pv
+from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+from vtkmodules.vtkCommonCore import VTK_RGBA
 
-import vtkraycast as vrc  # noqa: E402
+import vtkraycast as vrc
 
 pv.OFF_SCREEN = True
 

@@ -24,16 +24,16 @@ import pathlib
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pyvista as pv  # noqa: E402
-from vtkmodules.util.numpy_support import vtk_to_numpy  # noqa: E402
-from vtkmodules.vtkCommonCore import VTK_DOUBLE  # noqa: E402
-from vtkmodules.vtkFiltersCore import vtkArrayCalculator  # noqa: E402
-from vtkmodules.vtkImagingGeneral import vtkImageGradientMagnitude  # noqa: E402
-from vtkmodules.vtkIOPLY import vtkPLYReader  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pyvista as pv
+from vtkmodules.util.numpy_support import vtk_to_numpy
+from vtkmodules.vtkCommonCore import VTK_DOUBLE
+from vtkmodules.vtkFiltersCore import vtkArrayCalculator
+from vtkmodules.vtkImagingGeneral import vtkImageGradientMagnitude
+from vtkmodules.vtkIOPLY import vtkPLYReader
 
-import vtkraycast as vrc  # noqa: E402
+import vtkraycast as vrc
 
 pv.OFF_SCREEN = True
 

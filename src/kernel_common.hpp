@@ -29,6 +29,17 @@ struct PointKernel {
 
 /// p - org computed in double, then rounded to Real: every kernel works in coordinates
 /// relative to the ray origin (the eye, for camera rays), whatever the world offset.
+/// The ray as the seed's kernels see it: origin at 0 (points are taken relative to
+/// `org`), direction rounded to Real once per ray.
+template <class Real>
+struct RayFrame {
+    RayFrame(const Ray& ray, const CastContext& context)
+        : org(ray.org), cull(context.cull_back_faces), dir{Real(ray.dir[0]), Real(ray.dir[1]), Real(ray.dir[2])} {}
+    const double* org;
+    bool cull;
+    Real dir[3];
+};
+
 template <class Real>
 inline void relative(const double* p, const double* org, Real out[3]) {
     for (int k = 0; k < 3; ++k) out[k] = static_cast<Real>(p[k] - org[k]);

@@ -15,27 +15,25 @@ namespace vrc {
 template <class Real>
 class SeedCramer : public PointKernel<SeedCramer<Real>> {
    public:
-    SeedCramer(const Ray& ray, const CastContext& context)
-        : org_(ray.org), cull_(context.cull_back_faces),
-          dir_{Real(ray.dir[0]), Real(ray.dir[1]), Real(ray.dir[2])} {}
+    SeedCramer(const Ray& ray, const CastContext& context) : ray_(ray, context) {}
 
     bool operator()(const double* pa, const double* pb, const double* pc, double tmin, double tmax, double& t,
                     Real b[3]) const {
         Real p1[3], p2[3], p3[3];
-        relative(pa, org_, p1);
-        relative(pb, org_, p2);
-        relative(pc, org_, p3);
+        relative(pa, ray_.org, p1);
+        relative(pb, ray_.org, p2);
+        relative(pc, ray_.org, p3);
         // m(r, c): column 0 = P3 - P1, column 1 = P3 - P2, column 2 = d.
         Real m[3][3];
         for (int r = 0; r < 3; ++r) {
             m[r][0] = p3[r] - p1[r];
             m[r][1] = p3[r] - p2[r];
-            m[r][2] = dir_[r];
+            m[r][2] = ray_.dir[r];
         }
         const Real det = m[0][0] * (m[1][1] * m[2][2] - m[2][1] * m[1][2]) -
                          m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
                          m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
-        if (det == 0 || (cull_ && det > 0)) return false;
+        if (det == 0 || (ray_.cull && det > 0)) return false;
         const Real inv = Real(1) / det;
         Real minv[3][3];
         minv[0][0] = (m[1][1] * m[2][2] - m[2][1] * m[1][2]) * inv;
@@ -61,9 +59,7 @@ class SeedCramer : public PointKernel<SeedCramer<Real>> {
     }
 
    private:
-    const double* org_;
-    bool cull_;
-    Real dir_[3];
+    RayFrame<Real> ray_;
 };
 
 }  // namespace vrc

@@ -15,27 +15,25 @@ namespace vrc {
 template <class Real>
 class MollerTrumbore : public PointKernel<MollerTrumbore<Real>> {
    public:
-    MollerTrumbore(const Ray& ray, const CastContext& context)
-        : org_(ray.org), cull_(context.cull_back_faces),
-          dir_{Real(ray.dir[0]), Real(ray.dir[1]), Real(ray.dir[2])} {}
+    MollerTrumbore(const Ray& ray, const CastContext& context) : ray_(ray, context) {}
 
     bool operator()(const double* pa, const double* pb, const double* pc, double tmin, double tmax, double& t,
                     Real b[3]) const {
         Real p1[3], p2[3], p3[3], e1[3], e2[3], pvec[3], qvec[3];
-        relative(pa, org_, p1);
-        relative(pb, org_, p2);
-        relative(pc, org_, p3);
+        relative(pa, ray_.org, p1);
+        relative(pb, ray_.org, p2);
+        relative(pc, ray_.org, p3);
         sub(p2, p1, e1);
         sub(p3, p1, e2);
-        cross(dir_, e2, pvec);
+        cross(ray_.dir, e2, pvec);
         const Real det = dot(e1, pvec);
-        if (det == 0 || (cull_ && det < 0)) return false;
+        if (det == 0 || (ray_.cull && det < 0)) return false;
         const Real inv = Real(1) / det;
         const Real tvec[3] = {-p1[0], -p1[1], -p1[2]};  // origin - P1, the origin being 0
         const Real u = dot(tvec, pvec) * inv;
         if (!(u >= 0 && u <= 1)) return false;
         cross(tvec, e1, qvec);
-        const Real v = dot(dir_, qvec) * inv;
+        const Real v = dot(ray_.dir, qvec) * inv;
         if (!(v >= 0 && u + v <= 1)) return false;
         const Real ti = dot(e2, qvec) * inv;
         if (!(ti >= tmin && ti <= tmax)) return false;
@@ -47,9 +45,7 @@ class MollerTrumbore : public PointKernel<MollerTrumbore<Real>> {
     }
 
    private:
-    const double* org_;
-    bool cull_;
-    Real dir_[3];
+    RayFrame<Real> ray_;
 };
 
 }  // namespace vrc

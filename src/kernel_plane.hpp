@@ -16,24 +16,22 @@ namespace vrc {
 template <class Real>
 class SeedPlane : public PointKernel<SeedPlane<Real>> {
    public:
-    SeedPlane(const Ray& ray, const CastContext& context)
-        : org_(ray.org), cull_(context.cull_back_faces),
-          dir_{Real(ray.dir[0]), Real(ray.dir[1]), Real(ray.dir[2])} {}
+    SeedPlane(const Ray& ray, const CastContext& context) : ray_(ray, context) {}
 
     bool operator()(const double* pa, const double* pb, const double* pc, double tmin, double tmax, double& t,
                     Real b[3]) const {
         Real p1[3], p2[3], p3[3], e1[3], e2[3], n[3];
-        relative(pa, org_, p1);
-        relative(pb, org_, p2);
-        relative(pc, org_, p3);
+        relative(pa, ray_.org, p1);
+        relative(pb, ray_.org, p2);
+        relative(pc, ray_.org, p3);
         sub(p2, p1, e1);
         sub(p3, p1, e2);
         cross(e1, e2, n);
-        const Real nd = dot(n, dir_);
-        if (nd == 0 || (cull_ && nd > 0)) return false;  // tangent ray, or a back face
+        const Real nd = dot(n, ray_.dir);
+        if (nd == 0 || (ray_.cull && nd > 0)) return false;  // tangent ray, or a back face
         const Real ti = dot(n, p1) / nd;
         if (!(ti >= tmin && ti <= tmax)) return false;
-        const Real pi[3] = {ti * dir_[0], ti * dir_[1], ti * dir_[2]};
+        const Real pi[3] = {ti * ray_.dir[0], ti * ray_.dir[1], ti * ray_.dir[2]};
         // Twice the area (times |n|) of (P1, P2, Pi), (P2, P3, Pi), (P3, P1, Pi): the
         // weights of P3, P1 and P2.
         const Real w3 = sub_triangle(p1, p2, pi, n), w1 = sub_triangle(p2, p3, pi, n), w2 = sub_triangle(p3, p1, pi, n);
@@ -56,9 +54,7 @@ class SeedPlane : public PointKernel<SeedPlane<Real>> {
         return dot(ni, n);
     }
 
-    const double* org_;
-    bool cull_;
-    Real dir_[3];
+    RayFrame<Real> ray_;
 };
 
 }  // namespace vrc

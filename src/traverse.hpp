@@ -66,6 +66,22 @@ inline bool may_hit_sphere(const Scene& scene, const Ray& ray) {
     return tc + half >= ray.tmin && tc - half <= ray.tmax;
 }
 
+/// Tests triangle i (leaf order) and keeps it in `hit` when it is closer, or as close with
+/// a lower input triangle index; `bound` (the far end of the search) shrinks with it.
+template <class Kernel, class Real>
+inline void test_triangle(const Kernel& kernel, const Scene& scene, uint32_t i, double tmin, double& bound,
+                          Hit<Real>& hit) {
+    double t;
+    Real b[3];
+    // The kernel checks t <= bound = hit.t, so a hit here is closer or a tie.
+    if (kernel.test(scene, i, tmin, bound, t, b) &&
+        (!hit.found() || t < hit.t || scene.prim_ids[i] < scene.prim_ids[hit.prim])) {
+        hit.t = bound = t;
+        hit.prim = i;
+        for (int c = 0; c < 3; ++c) hit.b[c] = b[c];
+    }
+}
+
 /// The seed lecture's method (accel = "none"): the whole model's bounding sphere, then its
 /// bounding box, then every triangle. Ties go to the lowest input triangle index, as below.
 template <template <class> class Kernel, class Real>
@@ -75,16 +91,7 @@ Hit<Real> brute_force_hit(const Scene& scene, const Ray& ray, const CastContext&
     if (BoxTester(ray).enter(scene.bounds, ray.tmin, ray.tmax) == std::numeric_limits<double>::infinity()) return hit;
     const Kernel<Real> kernel(ray, context);
     double bound = ray.tmax;
-    for (uint32_t i = 0, n = uint32_t(scene.n_triangles()); i < n; ++i) {
-        double t;
-        Real b[3];
-        if (kernel.test(scene, i, ray.tmin, bound, t, b) &&
-            (!hit.found() || t < hit.t || scene.prim_ids[i] < scene.prim_ids[hit.prim])) {
-            hit.t = bound = t;
-            hit.prim = i;
-            for (int c = 0; c < 3; ++c) hit.b[c] = b[c];
-        }
-    }
+    for (uint32_t i = 0, n = uint32_t(scene.n_triangles()); i < n; ++i) test_triangle(kernel, scene, i, ray.tmin, bound, hit);
     return hit;
 }
 
@@ -107,19 +114,8 @@ Hit<Real> closest_hit(const Scene& scene, const Ray& ray, const CastContext& con
     for (;;) {
         const Node& node = scene.nodes[current];
         if (node.is_leaf()) {
-            for (uint32_t i = node.index, end = node.index + node.count; i < end; ++i) {
-                double t;
-                Real b[3];
-                if (kernel.test(scene, i, ray.tmin, bound, t, b) &&
-                    (!hit.found() || t < hit.t || scene.prim_ids[i] < scene.prim_ids[hit.prim])) {
-                    // the kernel already checked t <= bound = hit.t, so here t < hit.t or a tie
-                    hit.t = bound = t;
-                    hit.prim = i;
-                    hit.b[0] = b[0];
-                    hit.b[1] = b[1];
-                    hit.b[2] = b[2];
-                }
-            }
+            for (uint32_t i = node.index, end = node.index + node.count; i < end; ++i)
+                test_triangle(kernel, scene, i, ray.tmin, bound, hit);
         } else {
             const uint32_t left = node.index;
             double tl = boxes.enter(scene.nodes[left].box, ray.tmin, bound);

@@ -12,3 +12,22 @@ if "vtkraycast" in sys.modules and not hasattr(sys.modules["vtkraycast"], "Scene
     del sys.modules["vtkraycast"]
 
 os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
+
+
+import subprocess  # noqa: E402
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture
+def run_python(tmp_path):
+    """Runs Python code in a fresh interpreter (outside the checkout) and returns it done;
+    fails the test with the child's stderr if it did not exit cleanly."""
+
+    def run(code: str, timeout: float = 120) -> subprocess.CompletedProcess:
+        command = [sys.executable, "-c", code]
+        done = subprocess.run(command, capture_output=True, text=True, timeout=timeout, cwd=tmp_path, check=False)
+        assert done.returncode == 0, done.stderr
+        return done
+
+    return run

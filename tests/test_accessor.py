@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pyvista as pv
 
 import vtkraycast as vrc
 
 
-def test_raycast_is_available_in_a_fresh_interpreter_without_importing_vtkraycast(tmp_path):
+def test_raycast_is_available_in_a_fresh_interpreter_without_importing_vtkraycast(run_python):
     code = (
         "import sys\n"
         "import pyvista as pv\n"
@@ -20,8 +17,7 @@ def test_raycast_is_available_in_a_fresh_interpreter_without_importing_vtkraycas
         "image = pv.Sphere().raycast(camera, arrays=['Depth'])\n"
         "print(image.dimensions, 'vtkraycast' in sys.modules)\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=tmp_path)
-    assert done.returncode == 0, done.stderr
+    done = run_python(code)
     assert done.stdout.strip() == "(640, 480, 1) True"
 
 

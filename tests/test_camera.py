@@ -180,12 +180,9 @@ def test_cast_through_a_plotter_overlays_its_screenshot(parallel):
     assert iou > 0.9, iou  # the mask is thin: also compare on the covered pixels alone
 
 
-def test_to_vtk_cameras_render(tmp_path):
+def test_to_vtk_cameras_render(run_python):
     """A camera from to_vtk() made before any OpenGL module is loaded must still render
     (a plain vtkCamera would crash the renderer)."""
-    import subprocess
-    import sys
-
     code = (
         "import vtkraycast as vrc\n"
         "vc = vrc.Camera((0, 0, 3), (0, 0, 0), (0, 1, 0), view_angle=40, nx=64, ny=48).to_vtk()\n"
@@ -195,5 +192,5 @@ def test_to_vtk_cameras_render(tmp_path):
         "a = vtkActor(); a.SetMapper(m); r = vtkRenderer(); r.AddActor(a); r.SetActiveCamera(vc)\n"
         "w = vtkRenderWindow(); w.SetOffScreenRendering(1); w.AddRenderer(r); w.Render(); print('rendered')\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=tmp_path)
-    assert done.returncode == 0 and "rendered" in done.stdout, done.stderr
+    done = run_python(code)
+    assert "rendered" in done.stdout

@@ -11,7 +11,8 @@ import pytest
 import vtkraycast
 
 MODULES = sorted(
-    name for _, name, _ in pkgutil.walk_packages(vtkraycast.__path__, "vtkraycast.")
+    name
+    for _, name, _ in pkgutil.walk_packages(vtkraycast.__path__, "vtkraycast.")
     if not name.endswith(("__main__", "_core"))
 )
 

@@ -3,9 +3,6 @@ progress, errors."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 import pyvista as pv
@@ -86,9 +83,14 @@ def test_camera_change_recasts_without_rebuilding_and_mesh_change_rebuilds():
 def test_setters_modify_only_on_change():
     caster = vrc.RayCastFilter()
     for setter, value in [
-        ("SetResolution", (10, 20)), ("SetStrategy", ("watertight",)), ("SetPrecision", ("float32",)),
-        ("SetArrays", (["Depth"],)), ("SetInterpolate", (False,)), ("SetBackfaceCulling", (True,)),
-        ("SetThreads", (1,)), ("SetWorldSpace", (True,)),
+        ("SetResolution", (10, 20)),
+        ("SetStrategy", ("watertight",)),
+        ("SetPrecision", ("float32",)),
+        ("SetArrays", (["Depth"],)),
+        ("SetInterpolate", (False,)),
+        ("SetBackfaceCulling", (True,)),
+        ("SetThreads", (1,)),
+        ("SetWorldSpace", (True,)),
     ]:
         getattr(caster, setter)(*value)
         mtime = caster.GetMTime()
@@ -202,7 +204,7 @@ def test_image_filter_downstream():
     assert out.GetDimensions() == (80, 60, 1)
 
 
-def test_the_filter_does_not_import_pyvista(tmp_path):
+def test_the_filter_does_not_import_pyvista(run_python):
     code = (
         "import sys, vtkraycast\n"
         "from vtkmodules.vtkFiltersSources import vtkSphereSource\n"
@@ -213,5 +215,4 @@ def test_the_filter_does_not_import_pyvista(tmp_path):
         "assert f.GetOutput().GetNumberOfPoints() == 256\n"
         "assert 'pyvista' not in sys.modules, 'pyvista was imported'\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=tmp_path)
-    assert done.returncode == 0, done.stderr
+    run_python(code)

@@ -69,7 +69,7 @@ def test_cell_ids_point_at_the_input_cell_of_every_hit():
     mesh = mixed_mesh()
     image = vrc.cast(mesh, top_view(), arrays=["CellId", "Position", "label", "weight", "TriangleId"])
     hit = image["CellId"] >= 0
-    x, y = image["Position"][hit, 0], image["Position"][hit, 1]
+    x = image["Position"][hit, 0]
     expected = np.vectorize(CELL_OF_SQUARE.get)(np.floor(x / 2).astype(int))
     np.testing.assert_array_equal(image["CellId"][hit], expected)
     # Cell data are copied from the hit cell; misses are 0 (integers) and NaN (floats).

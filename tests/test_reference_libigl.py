@@ -80,9 +80,7 @@ def camera_rays(cam: vrc.Camera) -> tuple[np.ndarray, np.ndarray]:
     return origins, np.ascontiguousarray(directions)
 
 
-def random_cameras(
-    ref: Reference, seed: int, n: int = 3, nx: int = 160, ny: int = 120
-) -> list[vrc.Camera]:
+def random_cameras(ref: Reference, seed: int, n: int = 3, nx: int = 160, ny: int = 120) -> list[vrc.Camera]:
     """Perspective cameras with the eye on a sphere of 1.5-3 mesh radii, looking near the centre."""
     rng = np.random.default_rng(seed)
     cams = []
@@ -114,10 +112,7 @@ def line_meets_triangle(o: np.ndarray, p: np.ndarray, P: np.ndarray) -> np.ndarr
     (o, p, c, a) do not have opposite orientations (zero = on an edge counts as meeting)."""
     o, p = np.ascontiguousarray(o, dtype=np.float64), np.ascontiguousarray(p, dtype=np.float64)
     s = np.stack(
-        [
-            orient3d(o, p, np.ascontiguousarray(P[:, e]), np.ascontiguousarray(P[:, (e + 1) % 3]))
-            for e in range(3)
-        ],
+        [orient3d(o, p, np.ascontiguousarray(P[:, e]), np.ascontiguousarray(P[:, (e + 1) % 3])) for e in range(3)],
         -1,
     )
     return ~((s > 0).any(-1) & (s < 0).any(-1)) & (s != 0).any(-1)
@@ -213,9 +208,7 @@ def explain_disagreements(ref: Reference, o, d, ours, theirs, delta):
             continue
         P = ref.V[ref.F[ids[h, side]]]
         t[h, side] = plane_t(o[h], d[h], P)
-        meets[h, side], near[h, side] = edge_certificates(
-            o[h], d[h], t[h, side], P, np.full(h.size, delta)
-        )
+        meets[h, side], near[h, side] = edge_certificates(o[h], d[h], t[h, side], P, np.full(h.size, delta))
     nearer = np.argmin(t, 1)
     edge = near[np.arange(m), nearer]
     both = (ids >= 0).all(1)
@@ -225,13 +218,7 @@ def explain_disagreements(ref: Reference, o, d, ours, theirs, delta):
         if not meets[k].all():
             out.append(None)
         elif edge[k]:
-            out.append(
-                "edge (silhouette)"
-                if not both[k]
-                else "edge (shared)"
-                if tie[k]
-                else "edge (occluding)"
-            )
+            out.append("edge (silhouette)" if not both[k] else "edge (shared)" if tie[k] else "edge (occluding)")
         elif tie[k]:
             out.append("depth tie")
         else:
@@ -245,9 +232,7 @@ def compare_ids(ref, o, d, ours, theirs, label):
     same = ours == theirs
     same_hit = (ours >= 0) == (theirs >= 0)
     bad = np.flatnonzero(~same)
-    kinds = explain_disagreements(
-        ref, o[bad], d[bad], ours[bad], theirs[bad], DELTA_REL * ref.radius
-    )
+    kinds = explain_disagreements(ref, o[bad], d[bad], ours[bad], theirs[bad], DELTA_REL * ref.radius)
     tally = Counter(k or "UNEXPLAINED" for k in kinds)
     print(
         f"\n[libigl {label} {ref.name}] {n} rays, hits {np.mean(ours >= 0):.3f}: "
@@ -255,9 +240,7 @@ def compare_ids(ref, o, d, ours, theirs, label):
         f"hit/miss agreement {same_hit.mean():.5%}"
     )
     unexplained = [int(i) for i, k in zip(bad, kinds) if k is None]
-    assert not unexplained, (
-        f"rays {unexplained[:10]}: ours {ours[unexplained[:10]]}, libigl {theirs[unexplained[:10]]}"
-    )
+    assert not unexplained, f"rays {unexplained[:10]}: ours {ours[unexplained[:10]]}, libigl {theirs[unexplained[:10]]}"
     return same.mean(), same_hit.mean()
 
 
@@ -309,8 +292,7 @@ def test_camera_depth_matches_libigl(ref):
         assert (err <= F32_ROUND + F64_SLACK).all(), err.max()
         assert np.isnan(image["Depth"][image["TriangleId"] < 0]).all()
     print(
-        f"\n[libigl depth {ref.name}] max relative |Depth/d - t_igl| = {worst:.3e} "
-        f"(float32 half-ulp {F32_ROUND:.3e})"
+        f"\n[libigl depth {ref.name}] max relative |Depth/d - t_igl| = {worst:.3e} (float32 half-ulp {F32_ROUND:.3e})"
     )
 
 
@@ -334,9 +316,7 @@ def test_barycentric_sums_to_one_and_reproduces_the_hit_point(ref):
         err = np.linalg.norm(from_weights - from_ray, axis=1).max() / ref.radius
         worst_point = max(worst_point, err)
         assert err <= 1e-9
-        np.testing.assert_allclose(
-            image["Position"][hit], from_weights, rtol=0, atol=1e-12 * ref.radius
-        )
+        np.testing.assert_allclose(image["Position"][hit], from_weights, rtol=0, atol=1e-12 * ref.radius)
         theirs, _, uv = ref.igl(o, d)
         same = theirs[hit] == tri[hit]
         igl_w = np.column_stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]])[hit][same]
@@ -369,9 +349,7 @@ def test_intersect_random_rays_matches_libigl(ref):
     igl_w = np.column_stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]])
     assert np.abs(ours["barycentric"][both] - igl_w[both]).max() <= F32_ROUND + F64_SLACK
     tid = ours["triangle_id"]
-    np.testing.assert_array_equal(
-        ours["cell_id"], np.where(tid >= 0, ref.scene.prepared.cell_ids[tid], -1)
-    )
+    np.testing.assert_array_equal(ours["cell_id"], np.where(tid >= 0, ref.scene.prepared.cell_ids[tid], -1))
     miss = ours["triangle_id"] < 0
     assert np.isnan(ours["t"][miss]).all() and np.isnan(ours["barycentric"][miss]).all()
     print(f"[libigl random rays {ref.name}] max relative |t - t_igl| = {err.max():.3e}")
@@ -386,9 +364,7 @@ def test_rays_through_vertices_and_edges(ref):
     rng = np.random.default_rng(5000 + ref.seed)
     n = 20000
     u = rng.normal(size=(n, 3))
-    o = ref.center + u / np.linalg.norm(u, axis=1, keepdims=True) * ref.radius * rng.uniform(
-        1.5, 3.0, (n, 1)
-    )
+    o = ref.center + u / np.linalg.norm(u, axis=1, keepdims=True) * ref.radius * rng.uniform(1.5, 3.0, (n, 1))
     tri = rng.integers(0, len(ref.F), n)
     e = rng.integers(0, 3, n)
     a, b = ref.V[ref.F[tri, e]], ref.V[ref.F[tri, (e + 1) % 3]]
@@ -447,9 +423,7 @@ def test_scene_cast_equals_cast(ref):
         b = vrc.cast(ref.mesh, cam)
         assert a.dimensions == b.dimensions == (cam.nx, cam.ny, 1)
         assert list(a.point_data.keys()) == list(b.point_data.keys())
-        assert {"TriangleId", "CellId", "Barycentric", "Depth", "vtkValidPointMask"} <= set(
-            a.point_data.keys()
-        )
+        assert {"TriangleId", "CellId", "Barycentric", "Depth", "vtkValidPointMask"} <= set(a.point_data.keys())
         for name in a.point_data:
             assert a[name].dtype == b[name].dtype, name
             np.testing.assert_array_equal(a[name], b[name], err_msg=name)
@@ -477,9 +451,7 @@ def grid_eyes(ref: Reference, rng: np.random.Generator, n: int) -> np.ndarray:
     for the float32-born mesh coordinates: the ray's line then passes exactly through the target."""
     u = rng.normal(size=(n, 3))
     grid = 2.0 ** np.floor(np.log2(ref.radius / 64))
-    eyes = ref.center + u / np.linalg.norm(u, axis=1, keepdims=True) * ref.radius * rng.uniform(
-        1.5, 3.0, (n, 1)
-    )
+    eyes = ref.center + u / np.linalg.norm(u, axis=1, keepdims=True) * ref.radius * rng.uniform(1.5, 3.0, (n, 1))
     return np.round(eyes / grid) * grid
 
 
@@ -506,9 +478,7 @@ def test_no_leaks_where_the_surface_closes_around_the_ray(ref):
     k = rng.integers(0, pair.size, n)
     a, b = V[half[pair[k], 0]], V[half[pair[k], 1]]
     o_edge = grid_eyes(ref, rng, n)
-    d_edge, exact_edge = exact_difference(
-        (a + b) * 0.5, o_edge
-    )  # (a + b) / 2 is exact for float32 inputs
+    d_edge, exact_edge = exact_difference((a + b) * 0.5, o_edge)  # (a + b) / 2 is exact for float32 inputs
     side1 = orient3d(_c(o_edge), _c(a), _c(b), _c(V[half[pair[k], 2]]))
     side2 = orient3d(_c(o_edge), _c(a), _c(b), _c(V[half[pair[k] + 1, 2]]))
     closes_edge = exact_edge & (side1 * side2 < 0)
@@ -536,9 +506,7 @@ def test_no_leaks_where_the_surface_closes_around_the_ray(ref):
         ("edges", o_edge, d_edge, closes_edge),
         ("vertices", o_vert, d_vert, closes_vert),
     ):
-        assert closes.sum() > n // 4, (
-            "too few rays where the surface provably closes: the test would be vacuous"
-        )
+        assert closes.sum() > n // 4, "too few rays where the surface provably closes: the test would be vacuous"
         o, d = o[closes], d[closes]
         hits = ref.scene.intersect(o, d)
         leak = (hits["triangle_id"] < 0) | ~(hits["t"] <= 1.0 + 1e-12)

@@ -53,9 +53,7 @@ def clipping_range(mesh: pv.PolyData, cam: vrc.Camera) -> tuple[float, float]:
     return max(0.99 * z.min(), 1e-3 * far), far
 
 
-def render(
-    mesh: pv.PolyData, cam: vrc.Camera | None = None, clip: tuple[float, float] | None = None
-):
+def render(mesh: pv.PolyData, cam: vrc.Camera | None = None, clip: tuple[float, float] | None = None):
     """VTK's depth image (ny, nx; row 0 at the top; NaN background) and the camera read back
     from the plotter *after* rendering (``Camera.from_vtk``). With ``cam=None`` pyvista
     chooses the camera itself (isometric view, reset to the data)."""
@@ -122,9 +120,7 @@ def compare(mesh, cam, vtk_depth, label):
     return agree, rel
 
 
-@pytest.mark.parametrize(
-    "view,parallel", VIEWS, ids=[f"{v}-{'parallel' if p else 'perspective'}" for v, p in VIEWS]
-)
+@pytest.mark.parametrize("view,parallel", VIEWS, ids=[f"{v}-{'parallel' if p else 'perspective'}" for v, p in VIEWS])
 def test_mask_and_depth_match_vtk_rendering(named_mesh, view, parallel):
     """Our camera, copied into VTK: same pixels covered, same depth as the z-buffer."""
     name, mesh = named_mesh
@@ -133,9 +129,7 @@ def test_mask_and_depth_match_vtk_rendering(named_mesh, view, parallel):
     vtk_depth, back = render(mesh, cam, (near, far))
     # the camera VTK rendered with is the one we set (nothing reset it on the way)
     np.testing.assert_allclose(back.eye, cam.eye, rtol=0, atol=1e-12 * np.abs(cam.eye).max())
-    np.testing.assert_allclose(
-        back.look_at, cam.look_at, rtol=0, atol=1e-12 * np.abs(cam.eye).max()
-    )
+    np.testing.assert_allclose(back.look_at, cam.look_at, rtol=0, atol=1e-12 * np.abs(cam.eye).max())
     np.testing.assert_allclose(back.up, cam.up, rtol=0, atol=1e-12)
     assert (back.nx, back.ny, back.parallel) == (NX, NY, parallel)
     assert back.w == pytest.approx(cam.w, rel=1e-12) and back.h == pytest.approx(cam.h, rel=1e-12)
@@ -156,9 +150,7 @@ def test_mask_and_depth_match_a_camera_pyvista_chose(named_mesh):
 def test_picture_orientation_matches_vtk(parallel):
     """A small square seen in the upper-left of the view: VTK's depth image has it in its
     first rows and columns, our output in the last rows (row 0 at the bottom) and first columns."""
-    square = pv.Plane(
-        center=(-0.6, 0.4, 0.0), direction=(0, 0, 1), i_size=0.3, j_size=0.3
-    ).triangulate()
+    square = pv.Plane(center=(-0.6, 0.4, 0.0), direction=(0, 0, 1), i_size=0.3, j_size=0.3).triangulate()
     cam = vrc.Camera(
         (0, 0, 4),
         (0, 0, 0),
@@ -175,6 +167,4 @@ def test_picture_orientation_matches_vtk(parallel):
     hit = image["vtkValidPointMask"].reshape(NY, NX).astype(bool)
     out_rows, out_cols = np.nonzero(hit)
     assert out_rows.min() >= NY // 2 and out_cols.max() < NX // 2
-    compare(
-        square, back, vtk_depth, f"square orientation {'parallel' if parallel else 'perspective'}"
-    )
+    compare(square, back, vtk_depth, f"square orientation {'parallel' if parallel else 'perspective'}")

@@ -221,12 +221,9 @@ def test_progress_bar(capsys):
     assert "Ray casting 1200x1200" in err and "100%" in err
 
 
-def test_ctrl_c_stops_a_cast_and_leaves_the_scene_usable(tmp_path):
+def test_ctrl_c_stops_a_cast_and_leaves_the_scene_usable(run_python):
     """SIGINT during a long cast raises KeyboardInterrupt between tiles; the scene then
     casts normally."""
-    import subprocess
-    import sys
-
     code = (
         "import os, signal, threading, time, pyvista as pv, vtkraycast as vrc\n"
         "scene = vrc.Scene(pv.Sphere(theta_resolution=400, phi_resolution=400))\n"
@@ -241,8 +238,7 @@ def test_ctrl_c_stops_a_cast_and_leaves_the_scene_usable(tmp_path):
         "small = scene.cast(cam.replace(nx=8, ny=8), arrays=['TriangleId'])\n"
         "print('usable', int((small['TriangleId'] >= 0).sum()))\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path)
-    assert done.returncode == 0, done.stderr
+    done = run_python(code)
     lines = done.stdout.split("\n")
     assert lines[0].startswith("interrupted after"), done.stdout
     assert float(lines[0].split()[-1]) < 2.0

@@ -77,7 +77,7 @@ def closed_scene(request):
 @pytest.mark.parametrize("precision", PRECISIONS)
 @pytest.mark.parametrize("strategy", EXACT)
 def test_exact_strategies_never_leak_nor_pick_a_wrong_triangle(closed_scene, strategy, precision):
-    params, scene, origins, directions, ref = closed_scene
+    _, scene, origins, directions, ref = closed_scene
     hits = scene.intersect(origins, directions, strategy=strategy, precision=precision)
     masks = classify(ref, hits["triangle_id"])
     assert masks["leak"].sum() == 0
@@ -95,7 +95,8 @@ def test_leaks_of_the_other_strategies_are_measured(closed_scene, strategy, prec
     leaks, wrong = int(masks["leak"].sum()), int(masks["wrong"].sum())
     record_property("leaks", leaks)
     record_property("wrong", wrong)
-    print(f"{strategy} {precision} offset={params[0]:g} scale={params[1]:g}: {leaks} leaks, {wrong} wrong of {len(origins)}")
+    offset, scale = params
+    print(f"{strategy} {precision} offset={offset:g} scale={scale:g}: {leaks} leaks, {wrong} wrong of {len(origins)}")
     if strategy == "plane":
         # The seed's strict inside test rejects points exactly on an edge: rays through
         # vertices leak by construction.

@@ -37,8 +37,11 @@ def test_t_and_weights_are_exact():
     rhs = [fo[k] - F[2][k] for k in range(3)]
 
     def det(c0, c1, c2):
-        return (c0[0] * (c1[1] * c2[2] - c1[2] * c2[1]) - c1[0] * (c0[1] * c2[2] - c0[2] * c2[1])
-                + c2[0] * (c0[1] * c1[2] - c0[2] * c1[1]))
+        return (
+            c0[0] * (c1[1] * c2[2] - c1[2] * c2[1])
+            - c1[0] * (c0[1] * c2[2] - c0[2] * c2[1])
+            + c2[0] * (c0[1] * c1[2] - c0[2] * c1[1])
+        )
 
     full = det(*cols)
     w1, w2, t = det(rhs, cols[1], cols[2]) / full, det(cols[0], rhs, cols[2]) / full, det(cols[0], cols[1], rhs) / full

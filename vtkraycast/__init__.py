@@ -11,5 +11,5 @@ from .camera import Camera
 from .filter import RayCastFilter
 from .scene import PRECISIONS, STRATEGIES, Scene, cast
 
-__all__ = ["Camera", "RayCastFilter", "Scene", "cast", "STRATEGIES", "PRECISIONS"]
+__all__ = ["PRECISIONS", "STRATEGIES", "Camera", "RayCastFilter", "Scene", "cast"]
 __version__ = "0.1.0"

@@ -189,11 +189,13 @@ class Camera:
 
     def pixel_center(self, i: int, j: int) -> np.ndarray:
         """Centre of pixel ``(i, j)`` in camera coordinates, ``j`` counted from the top (the seed)."""
-        return np.array([
-            -self.w * 0.5 + self.w / self.nx * (i + 0.5),
-            self.h * 0.5 - self.h / self.ny * (j + 0.5),
-            -self.d,
-        ])
+        return np.array(
+            [
+                -self.w * 0.5 + self.w / self.nx * (i + 0.5),
+                self.h * 0.5 - self.h / self.ny * (j + 0.5),
+                -self.d,
+            ]
+        )
 
     @classmethod
     def from_vtk(cls, camera: Any, nx: int | None = None, ny: int | None = None) -> Camera:

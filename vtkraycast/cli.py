@@ -12,8 +12,8 @@ import numpy as np
 from vtkmodules.vtkCommonDataModel import vtkImageData
 
 from .camera import _VIEWS, Camera
-from .picture import barycentric_rgba, write_png
 from .image import fill_image
+from .picture import barycentric_rgba, write_png
 from .scene import STRATEGIES, Scene
 
 

@@ -15,7 +15,7 @@ from vtkmodules.vtkCommonCore import vtkDataArray
 
 from .mesh import PreparedMesh
 
-__all__ = ["GEOMETRY_ARRAYS", "DEFAULT_ARRAYS", "select_arrays", "compute_arrays"]
+__all__ = ["DEFAULT_ARRAYS", "GEOMETRY_ARRAYS", "compute_arrays", "select_arrays"]
 
 #: Arrays the caster itself produces, in output order.
 GEOMETRY_ARRAYS = ("TriangleId", "CellId", "Barycentric", "Depth", "Position", "Normal", "vtkValidPointMask")

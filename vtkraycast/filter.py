@@ -15,8 +15,8 @@ from vtkmodules.vtkCommonDataModel import vtkDataObject, vtkDataSet, vtkImageDat
 from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline
 
 from .camera import Camera, _pixels
-from .image import image_geometry, fill_image
-from .scene import STRATEGIES, Scene, _precision, _strategy, _threads
+from .image import fill_image, image_geometry
+from .scene import Scene, _precision, _strategy, _threads
 
 __all__ = ["RayCastFilter"]
 
@@ -191,7 +191,7 @@ class RayCastFilter(VTKPythonAlgorithmBase):
             info.Set(vtkDataObject.ORIGIN(), *origin)
             info.Set(vtkDataObject.SPACING(), *spacing)
             vtkDataObject.DIRECTION().Set(info, direction.ravel().tolist(), 9)
-        except Exception as error:  # noqa: BLE001 - reported to VTK and re-raised by Update()
+        except Exception as error:
             return self._report(error)
         return 1
 
@@ -219,7 +219,7 @@ class RayCastFilter(VTKPythonAlgorithmBase):
         except InterruptedError:
             output.Initialize()  # aborted on request (AbortExecuteOn): not an error
             self.SetAbortExecute(0)  # VTK leaves the flag on; the next update runs again
-        except Exception as error:  # noqa: BLE001 - reported to VTK and re-raised by Update()
+        except Exception as error:
             output.Initialize()
             return self._report(error)
         return 1

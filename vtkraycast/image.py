@@ -9,7 +9,7 @@ from vtkmodules.vtkCommonDataModel import vtkImageData
 
 from .camera import Camera
 
-__all__ = ["image_geometry", "fill_image"]
+__all__ = ["fill_image", "image_geometry"]
 
 
 def image_geometry(camera: Camera | None, world_space: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -29,7 +29,9 @@ def image_geometry(camera: Camera | None, world_space: bool) -> tuple[np.ndarray
     return origin, np.array([sx, sy, 1.0]), direction
 
 
-def fill_image(image: vtkImageData, camera: Camera, buffers: dict[str, np.ndarray], *, world_space: bool = False) -> vtkImageData:
+def fill_image(
+    image: vtkImageData, camera: Camera, buffers: dict[str, np.ndarray], *, world_space: bool = False
+) -> vtkImageData:
     """Sets ``image`` to ``camera``'s pixel grid and adds ``buffers`` as point arrays (shared,
     not copied). ``Depth`` (else the first array) becomes the active scalars, which VTK's
     image filters work on."""

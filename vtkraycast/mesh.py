@@ -8,7 +8,6 @@ from typing import Any
 
 import numpy as np
 from vtkmodules.util.numpy_support import numpy_to_vtkIdTypeArray, vtk_to_numpy
-from vtkmodules.vtkCommonCore import vtkIdTypeArray
 from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkDataSet, vtkPolyData
 from vtkmodules.vtkFiltersCore import vtkTriangleFilter
 from vtkmodules.vtkFiltersGeometry import vtkDataSetSurfaceFilter
@@ -133,9 +132,7 @@ def as_polydata(mesh: Any) -> tuple[vtkPolyData, np.ndarray | None]:
         cell_map = vtk_to_numpy(ids).astype(np.int64) if ids is not None else np.zeros(0, np.int64)
         out.GetCellData().RemoveArray("vtkraycast_source_cell")
         return out, cell_map
-    raise TypeError(
-        f"expected a vtkPolyData, pyvista.PolyData or another vtkDataSet, got {type(mesh).__name__}"
-    )
+    raise TypeError(f"expected a vtkPolyData, pyvista.PolyData or another vtkDataSet, got {type(mesh).__name__}")
 
 
 def prepare_mesh(mesh: Any) -> PreparedMesh:

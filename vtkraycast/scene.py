@@ -17,7 +17,7 @@ from .fields import compute_arrays, needs_barycentric, select_arrays
 from .image import fill_image
 from .mesh import prepare_mesh
 
-__all__ = ["Scene", "STRATEGIES", "PRECISIONS"]
+__all__ = ["PRECISIONS", "STRATEGIES", "Scene"]
 
 #: Intersection strategies by name (DESIGN.md); "auto" picks the fastest exact one.
 STRATEGIES = ("auto", "watertight", "moller-trumbore", "plane", "cramer")
@@ -107,7 +107,7 @@ class Scene:
         return int(self._core.memory_bytes)
 
     @property
-    def prepared(self):  # noqa: ANN201 - PreparedMesh, kept out of the public namespace
+    def prepared(self):
         """The triangulated mesh (points, triangles, cell map) the scene was built from."""
         return self._mesh
 
@@ -148,9 +148,24 @@ class Scene:
         bary = np.empty((n, 3), real) if needs_barycentric(self._mesh, names) else None
         with progress_reporter(progress, progress_bar, f"Ray casting {camera.nx}x{camera.ny}") as poll:
             done = _core.cast_camera(
-                self._core, camera.frame, camera.d, camera.w, camera.h, camera.near, camera.far,
-                camera.nx, camera.ny, camera.parallel, kernel, accel, bool(backface_culling),
-                triangle_id, depth, bary, n_threads, poll,
+                self._core,
+                camera.frame,
+                camera.d,
+                camera.w,
+                camera.h,
+                camera.near,
+                camera.far,
+                camera.nx,
+                camera.ny,
+                camera.parallel,
+                kernel,
+                accel,
+                bool(backface_culling),
+                triangle_id,
+                depth,
+                bary,
+                n_threads,
+                poll,
             )
         if not done:
             raise InterruptedError("the cast was aborted")
@@ -240,8 +255,19 @@ class Scene:
         t = np.empty(n, real)
         bary = np.empty((n, 3), real)
         _core.cast_rays(
-            self._core, o, d, tmin, tmax, _strategy(strategy), _accel(accel), bool(backface_culling),
-            triangle_id, t, bary, _threads(threads), None,
+            self._core,
+            o,
+            d,
+            tmin,
+            tmax,
+            _strategy(strategy),
+            _accel(accel),
+            bool(backface_culling),
+            triangle_id,
+            t,
+            bary,
+            _threads(threads),
+            None,
         )
         hits = compute_arrays(self._mesh, ["CellId"], triangle_id, t, bary)
         return {"triangle_id": triangle_id, "cell_id": hits["CellId"], "t": t, "barycentric": bary}

@@ -29,7 +29,9 @@ def bumpy_sphere(subdivisions: int = 4, *, offset: float = 0.0, scale: float = 1
     return mesh
 
 
-def rays_at_vertices_and_edges(points: np.ndarray, triangles: np.ndarray, eye: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def rays_at_vertices_and_edges(
+    points: np.ndarray, triangles: np.ndarray, eye: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Rays from ``eye`` aimed at every point a triangle uses and every edge midpoint.
 
     Directions are ``target - eye`` in double precision: exact (the ray passes exactly

@@ -17,7 +17,7 @@ from fractions import Fraction
 
 import numpy as np
 
-__all__ = ["ExactHits", "exact_first_hits", "classify"]
+__all__ = ["ExactHits", "classify", "exact_first_hits"]
 
 
 @dataclass(frozen=True)
@@ -43,18 +43,26 @@ class ExactHits:
     on_edge: np.ndarray
 
 
-def _scaled_integers(values: np.ndarray) -> tuple[list[int], int]:
-    """Integers ``k`` and a shift ``s`` with ``values == k * 2**-s`` exactly."""
+def _scaled_integers(values: np.ndarray) -> list[int]:
+    """Integers ``k`` with ``values == k * 2**-s`` exactly, for one shift ``s``."""
     mantissa, exponent = np.frexp(values)
     ints = (mantissa * 2.0**53).astype(np.int64)  # exact: 53-bit mantissas
     exps = exponent.astype(np.int64) - 53
     nonzero = ints != 0
     shift = int(-exps[nonzero].min()) if nonzero.any() else 0
-    return [int(i) << int(e + shift) if i else 0 for i, e in zip(ints.tolist(), exps.tolist())], shift
+    return [int(i) << int(e + shift) if i else 0 for i, e in zip(ints.tolist(), exps.tolist())]
 
 
-def _candidates(points: np.ndarray, triangles: np.ndarray, o: np.ndarray, d: np.ndarray, tmin: float, tmax: float,
-                centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+def _candidates(
+    points: np.ndarray,
+    triangles: np.ndarray,
+    o: np.ndarray,
+    d: np.ndarray,
+    tmin: float,
+    tmax: float,
+    centres: np.ndarray,
+    radii: np.ndarray,
+) -> np.ndarray:
     """Triangles whose bounding sphere the ray may touch (a conservative float filter)."""
     dd = float(d @ d)
     oc = centres - o
@@ -62,12 +70,12 @@ def _candidates(points: np.ndarray, triangles: np.ndarray, o: np.ndarray, d: np.
     miss2 = np.einsum("ij,ij->i", oc, oc) - tc * tc * dd
     r = radii * (1 + 1e-6) + 1e-300
     half = r / math.sqrt(dd)
-    near = (miss2 <= r * r * (1 + 1e-6) + 1e-12 * np.einsum("ij,ij->i", oc, oc)) & (tc + half >= tmin) & (tc - half <= tmax)
-    return np.flatnonzero(near)
+    close = miss2 <= r * r * (1 + 1e-6) + 1e-12 * np.einsum("ij,ij->i", oc, oc)
+    return np.flatnonzero(close & (tc + half >= tmin) & (tc - half <= tmax))
 
 
 def _det(a: list[int], b: list[int], c: list[int]) -> int:
-    return (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0]))
+    return a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])
 
 
 def exact_first_hits(
@@ -113,7 +121,7 @@ def exact_first_hits(
         hits: list[tuple[int, Fraction, tuple[Fraction, Fraction, Fraction], bool]] = []
         if cand.size:
             tri_pts = corners[cand].reshape(-1, 3)
-            ints, shift = _scaled_integers(np.concatenate((o, d, tri_pts.ravel())))
+            ints = _scaled_integers(np.concatenate((o, d, tri_pts.ravel())))
             oi, di = ints[0:3], ints[3:6]
             for j, tri in enumerate(cand.tolist()):
                 base = 6 + 9 * j
@@ -125,13 +133,14 @@ def exact_first_hits(
                 if total == 0:
                     continue
                 # t = (A . n) / (d . n) with n = (B - A) x (C - A) and d . n = wa + wb + wc;
-                # A . n = det[A, B, C] since A . (A x .) = 0. Both in the same 2**shift units.
+                # A . n = det[A, B, C] since A . (A x .) = 0. The common 2**shift cancels.
                 t = Fraction(_det(a, b, c), total)
                 if not (tmin <= t <= tmax) or (best is not None and t > best):
                     continue
                 if best is None or t < best:
                     best, hits = t, []
-                hits.append((tri, t, (Fraction(wa, total), Fraction(wb, total), Fraction(wc, total)), 0 in (wa, wb, wc)))
+                weights = (Fraction(wa, total), Fraction(wb, total), Fraction(wc, total))
+                hits.append((tri, t, weights, 0 in (wa, wb, wc)))
         accepted.append(frozenset(h[0] for h in hits))
         if hits:
             first = min(hits)
