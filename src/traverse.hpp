@@ -66,20 +66,29 @@ inline bool may_hit_sphere(const Scene& scene, const Ray& ray) {
     return tc + half >= ray.tmin && tc - half <= ray.tmax;
 }
 
-/// Tests triangle i (leaf order) and keeps it in `hit` when it is closer, or as close with
-/// a lower input triangle index; `bound` (the far end of the search) shrinks with it.
+/// Hits whose t differ by less than this relative amount (a few dozen roundings of the
+/// kernel's precision) are ties: the same point reached through two triangles' own
+/// arithmetic (a shared edge, duplicates, coplanar overlaps). A tie goes to the lowest input
+/// triangle index, so the winner never depends on traversal order or rounding.
+template <class Real>
+constexpr double kTieTolerance = 32 * std::numeric_limits<Real>::epsilon();
+
+/// Tests triangle i (leaf order) and keeps it in `hit` when it is closer, or tied with a
+/// lower input triangle index; `bound` (the far end of the search) follows the closest hit
+/// plus the tie tolerance.
 template <class Kernel, class Real>
 inline void test_triangle(const Kernel& kernel, const Scene& scene, uint32_t i, double tmin, double& bound,
                           Hit<Real>& hit) {
     double t;
     Real b[3];
-    // The kernel checks t <= bound = hit.t, so a hit here is closer or a tie.
-    if (kernel.test(scene, i, tmin, bound, t, b) &&
-        (!hit.found() || t < hit.t || scene.prim_ids[i] < scene.prim_ids[hit.prim])) {
-        hit.t = bound = t;
-        hit.prim = i;
-        for (int c = 0; c < 3; ++c) hit.b[c] = b[c];
-    }
+    if (!kernel.test(scene, i, tmin, bound, t, b)) return;
+    const bool closer = !hit.found() || t < hit.t - kTieTolerance<Real> * std::fabs(hit.t);
+    const bool tie_won = !closer && scene.prim_ids[i] < scene.prim_ids[hit.prim];
+    if (!closer && !tie_won) return;
+    if (closer || t < hit.t) bound = std::min(bound, t + kTieTolerance<Real> * std::fabs(t));
+    hit.t = t;
+    hit.prim = i;
+    for (int c = 0; c < 3; ++c) hit.b[c] = b[c];
 }
 
 /// The seed lecture's method (accel = "none"): the whole model's bounding sphere, then its
