@@ -42,6 +42,7 @@ class CameraRays {
             }
             ray.tmin = c_.near;
             ray.tmax = c_.far;
+            ray.t_unit = 1.0;
         } else {
             for (int k = 0; k < 3; ++k) {
                 ray.org[k] = c_.eye[k];
@@ -49,11 +50,11 @@ class CameraRays {
             }
             ray.tmin = c_.near / c_.d;
             ray.tmax = c_.far / c_.d;
+            ray.t_unit = c_.d;  // depth = t d
         }
+        ray.normalize_direction();
         return ray;
     }
-    /// Depth along the viewing direction of a hit at parameter t.
-    [[nodiscard]] double depth(double t) const { return c_.parallel ? t : t * c_.d; }
 
     /// Square tiles of kTile x kTile pixels: neighbouring rays traverse the same nodes.
     static constexpr int64_t kTile = 16;
@@ -70,7 +71,7 @@ class CameraRays {
     CameraSpec c_;
 };
 
-/// Rays from (n, 3) origin and direction arrays; depth is the ray parameter t.
+/// Rays from (n, 3) origin and direction arrays; the output is the ray parameter t.
 class ArrayRays {
    public:
     ArrayRays(const double* origins, const double* directions, std::size_t n, double tmin, double tmax)
@@ -84,9 +85,9 @@ class ArrayRays {
         }
         ray.tmin = tmin_;
         ray.tmax = tmax_;
+        ray.normalize_direction();
         return ray;
     }
-    [[nodiscard]] double depth(double t) const { return t; }
 
     static constexpr std::size_t kChunk = 1024;
     [[nodiscard]] std::size_t n_tiles() const { return (n_ + kChunk - 1) / kChunk; }

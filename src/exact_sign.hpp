@@ -1,4 +1,4 @@
-// Exact sign of the orientation det[C - O, B - O, d] of doubles, with the floating-point
+// Exact signs of 3x3 determinants of double differences, with the floating-point
 // expansions of Shewchuk, "Adaptive Precision Floating-Point Arithmetic and Fast Robust
 // Geometric Predicates", Discrete & Computational Geometry 18, 1997. Used only when a
 // kernel's own evaluation is too close to zero for its sign to be trusted.
@@ -58,31 +58,78 @@ inline int expansion_sum(int m, const double* e, int n, const double* f, double*
     return k;
 }
 
-/// Sign (-1, 0, +1) of det[C, B, d] with C = c - o, B = b - o, computed exactly.
-inline int orientation(const double* c, const double* b, const double* o, const double* d) {
-    double cx[3][2], bx[3][2];  // two-term expansions of the differences, small term first
-    for (int k = 0; k < 3; ++k) {
-        two_diff(c[k], o[k], cx[k][1], cx[k][0]);
-        two_diff(b[k], o[k], bx[k][1], bx[k][0]);
-    }
-    // det = sum over permutations (i, j, k) of sign * C_i B_j d_k.
+/// A short expansion: the exact value of a double, or of a difference of two doubles.
+struct Short {
+    double v[2];
+    int n;
+};
+
+inline Short difference(double a, double b) {
+    Short s{};
+    two_diff(a, b, s.v[1], s.v[0]);
+    s.n = 2;
+    return s;
+}
+
+/// Exact sign of the 3x3 determinant whose columns are given as short expansions.
+inline int det3_sign(const Short c0[3], const Short c1[3], const Short c2[3]) {
     static constexpr int perm[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
-    double total[128];
+    double total[256], sum[256];
     int n_total = 0;
     for (int p = 0; p < 6; ++p) {
-        const double dk = p < 3 ? d[perm[p][2]] : -d[perm[p][2]];
-        double cd[4], part_lo[8], part_hi[8], term[16], sum[128];
-        const int n_cd = scale_expansion(2, cx[perm[p][0]], dk, cd);
-        const int n_lo = scale_expansion(n_cd, cd, bx[perm[p][1]][0], part_lo);
-        const int n_hi = scale_expansion(n_cd, cd, bx[perm[p][1]][1], part_hi);
-        const int n_term = expansion_sum(n_lo, part_lo, n_hi, part_hi, term);
+        // term = c0[i] * c1[j] * c2[k], negated for odd permutations
+        double ab[8], term[16], part[8];
+        int n_ab = 0, n_term = 0;
+        const Short& a = c0[perm[p][0]];
+        const Short& b = c1[perm[p][1]];
+        const Short& c = c2[perm[p][2]];
+        for (int q = 0; q < b.n; ++q) {
+            const int n_part = scale_expansion(a.n, a.v, b.v[q], part);
+            n_ab = n_ab ? expansion_sum(n_ab, ab, n_part, part, sum) : 0;
+            const double* src = n_ab ? sum : part;
+            if (!n_ab) n_ab = n_part;
+            for (int r = 0; r < n_ab; ++r) ab[r] = src[r];
+        }
+        for (int q = 0; q < c.n; ++q) {
+            const double factor = p < 3 ? c.v[q] : -c.v[q];
+            double scaled[16];
+            const int n_scaled = scale_expansion(n_ab, ab, factor, scaled);
+            n_term = n_term ? expansion_sum(n_term, term, n_scaled, scaled, sum) : 0;
+            const double* src = n_term ? sum : scaled;
+            if (!n_term) n_term = n_scaled;
+            for (int r = 0; r < n_term; ++r) term[r] = src[r];
+        }
         n_total = n_total ? expansion_sum(n_total, total, n_term, term, sum) : 0;
         const double* src = n_total ? sum : term;
         if (!n_total) n_total = n_term;
-        for (int q = 0; q < n_total; ++q) total[q] = src[q];
+        for (int r = 0; r < n_total; ++r) total[r] = src[r];
     }
     const double top = total[n_total - 1];  // the largest-magnitude term decides the sign
     return (top > 0) - (top < 0);
+}
+
+/// Sign (-1, 0, +1) of det[C, B, d] with C = c - o, B = b - o: the side of the plane
+/// through the ray and an edge, computed exactly.
+inline int orientation(const double* c, const double* b, const double* o, const double* d) {
+    Short cc[3], bb[3], dd[3];
+    for (int k = 0; k < 3; ++k) {
+        cc[k] = difference(c[k], o[k]);
+        bb[k] = difference(b[k], o[k]);
+        dd[k] = Short{{d[k], 0.0}, 1};
+    }
+    return det3_sign(cc, bb, dd);
+}
+
+/// Sign of det[A, B, C] with A = a - o, ...: the side of the triangle's plane the point o
+/// lies on (Shewchuk's orient3d), computed exactly.
+inline int volume(const double* a, const double* b, const double* c, const double* o) {
+    Short aa[3], bb[3], cc[3];
+    for (int k = 0; k < 3; ++k) {
+        aa[k] = difference(a[k], o[k]);
+        bb[k] = difference(b[k], o[k]);
+        cc[k] = difference(c[k], o[k]);
+    }
+    return det3_sign(aa, bb, cc);
 }
 
 }  // namespace exact

@@ -47,12 +47,30 @@ inline float round_up(double x) {
 
 /// A ray in world space. The origin stays in double precision whatever the kernel's
 /// precision, so kernels can subtract it from the vertices before rounding (work relative
-/// to the ray origin, not to the world origin). `t` is in units of `dir`'s length.
+/// to the ray origin, not to the world origin). `t` is in units of `dir`'s length;
+/// `output(t)` converts it to what the caller asked for (its own t, or a camera depth).
 struct Ray {
     double org[3];
     double dir[3];
     double tmin;
     double tmax;
+    double t_unit = 1.0;  ///< output = t * t_unit * 2**t_exponent
+    int t_exponent = 0;
+
+    [[nodiscard]] double output(double t) const { return std::ldexp(t * t_unit, t_exponent); }
+
+    /// Scales `dir` by a power of two (exactly) so that its largest component lies in
+    /// [1, 2), with tmin, tmax and the output scale to match: directions of any magnitude,
+    /// from subnormal to huge, then meet the kernels with no overflow in 1/d or the shear.
+    void normalize_direction() {
+        const double m = std::fmax(std::fabs(dir[0]), std::fmax(std::fabs(dir[1]), std::fabs(dir[2])));
+        if (!(m > 0) || !std::isfinite(m)) return;
+        const int e = std::ilogb(m);
+        for (double& c : dir) c = std::ldexp(c, -e);
+        tmin = std::ldexp(tmin, e);
+        tmax = std::ldexp(tmax, e);
+        t_exponent = -e;
+    }
 };
 
 /// The closest hit found so far. `prim` indexes the scene's (BVH-ordered) triangles;

@@ -36,11 +36,11 @@ class SeedPlane : public PointKernel<SeedPlane<Real>> {
         // weights of P3, P1 and P2.
         const Real w3 = sub_triangle(p1, p2, pi, n), w1 = sub_triangle(p2, p3, pi, n), w2 = sub_triangle(p3, p1, pi, n);
         if (!(w1 > 0 && w2 > 0 && w3 > 0)) return false;
-        const Real inv = Real(1) / (w1 + w2 + w3);
+        const Real sum = w1 + w2 + w3;  // divided by, not inverted: a tiny sum would overflow
         t = ti;
-        b[0] = w1 * inv;
-        b[1] = w2 * inv;
-        b[2] = w3 * inv;
+        b[0] = w1 / sum;
+        b[1] = w2 / sum;
+        b[2] = w3 / sum;
         return true;
     }
 

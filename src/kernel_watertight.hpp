@@ -70,17 +70,49 @@ class Watertight : public PointKernel<Watertight<Real>> {
         const Real det = u + v + w;  // > 0 when the triangle faces the ray origin
         if (det == 0 || (cull_ && det < 0)) return false;
         const Real az = sz_ * a[kz_], bz = sz_ * bb[kz_], cz = sz_ * c[kz_];
-        const double tt = static_cast<double>((u * az + v * bz + w * cz) / det);
+        const Real tu = u * az, tv = v * bz, tw = w * cz;
+        double tt = static_cast<double>((tu + tv + tw) / det);
+        // Rounding bound on tt: it grows as the terms cancel (a surface through the origin).
+        double slack = 32 * double(std::numeric_limits<Real>::epsilon()) *
+                       double((std::fabs(tu) + std::fabs(tv) + std::fabs(tw)) / std::fabs(det));
+        if (!(slack <= 1e-6 * std::fabs(tt))) plane_distance(pa, pb, pc, tt, slack);  // rare
+        if (tmin == 0 && std::fabs(tt) <= slack) {
+            // Is the plane in front of the origin or behind it? Within rounding of 0 (a
+            // surface through the eye) the exact orientation of the origin decides:
+            // t = det[A, B, C] / d.n exactly, and this kernel's det has the sign of -d.n.
+            if (exact::volume(pa, pb, pc, org_) * (det > 0 ? -1 : 1) < 0) return false;
+            tt = std::max(tt, 0.0);
+        }
         if (!(tt >= tmin && tt <= tmax)) return false;
         t = tt;
-        const Real inv = Real(1) / det;
-        b[0] = u * inv;
-        b[1] = v * inv;
-        b[2] = w * inv;
+        // Divisions, not a reciprocal: det may be as small as an exact-sign stand-in, whose
+        // reciprocal would overflow.
+        b[0] = u / det;
+        b[1] = v / det;
+        b[2] = w / det;
         return true;
     }
 
    private:
+    /// t from the triangle's plane, n.(A) / n.d in double with A = pa - O: when the sheared
+    /// terms cancel (the origin near the plane, or all edge functions tiny) this is the
+    /// better conditioned form. Sets t and its rounding bound.
+    void plane_distance(const double* pa, const double* pb, const double* pc, double& t, double& slack) const {
+        double a[3], b[3], c[3], e1[3], e2[3], n[3];
+        relative(pa, org_, a);
+        relative(pb, org_, b);
+        relative(pc, org_, c);
+        sub(b, a, e1);
+        sub(c, a, e2);
+        cross(e1, e2, n);
+        const double nd = dot(n, dir_), na = dot(n, a);
+        if (nd == 0) return;
+        t = na / nd;
+        const double norm_n = std::fabs(n[0]) + std::fabs(n[1]) + std::fabs(n[2]);
+        const double norm_a = std::fabs(a[0]) + std::fabs(a[1]) + std::fabs(a[2]);
+        slack = 32 * (std::numeric_limits<double>::epsilon() / 2) * norm_n * norm_a / std::fabs(nd);
+    }
+
     /// |p_k| + |s p_z|: bounds the sheared coordinate p_k - s p_z and scales its error.
     [[nodiscard]] Real magnitude(const Real p[3], int k, Real s) const {
         return std::fabs(p[k]) + std::fabs(s * p[kz_]);

@@ -52,7 +52,7 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
                                                   : closest_hit<Kernel, Real>(scene, ray, context);
                 const bool found = hit.found();
                 out.triangle_id[k] = found ? int64_t(scene.prim_ids[hit.prim]) : -1;
-                if (out.depth) out.depth[k] = found ? static_cast<Real>(rays.depth(hit.t)) : kNaN;
+                if (out.depth) out.depth[k] = found ? static_cast<Real>(ray.output(hit.t)) : kNaN;
                 if (out.barycentric)
                     for (int c = 0; c < 3; ++c) out.barycentric[3 * k + c] = found ? hit.b[c] : kNaN;
             });

@@ -53,25 +53,20 @@ def _scaled_integers(values: np.ndarray) -> list[int]:
     return [int(i) << int(e + shift) if i else 0 for i, e in zip(ints.tolist(), exps.tolist())]
 
 
-def _candidates(
-    points: np.ndarray,
-    triangles: np.ndarray,
-    o: np.ndarray,
-    d: np.ndarray,
-    tmin: float,
-    tmax: float,
-    centres: np.ndarray,
-    radii: np.ndarray,
-) -> np.ndarray:
-    """Triangles whose bounding sphere the ray may touch (a conservative float filter)."""
-    dd = float(d @ d)
+def _candidates(o: np.ndarray, d: np.ndarray, tmin: float, tmax: float, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Triangles whose bounding sphere the ray may touch (a conservative float filter, in
+    units of the direction's length so that tiny or huge directions cannot underflow)."""
+    scale = float(np.abs(d).max())
+    unit = d / scale
+    length = scale * float(np.linalg.norm(unit))
+    unit = unit / np.linalg.norm(unit)
     oc = centres - o
-    tc = oc @ d / dd
-    miss2 = np.einsum("ij,ij->i", oc, oc) - tc * tc * dd
+    along = oc @ unit
+    oc2 = np.einsum("ij,ij->i", oc, oc)
+    miss2 = oc2 - along * along  # cancels: the margin below covers its rounding
     r = radii * (1 + 1e-6) + 1e-300
-    half = r / math.sqrt(dd)
-    close = miss2 <= r * r * (1 + 1e-6) + 1e-12 * np.einsum("ij,ij->i", oc, oc)
-    return np.flatnonzero(close & (tc + half >= tmin) & (tc - half <= tmax))
+    close = miss2 <= r * r + 1e-12 * oc2
+    return np.flatnonzero(close & (along + r >= tmin * length) & (along - r <= tmax * length))
 
 
 def _det(a: list[int], b: list[int], c: list[int]) -> int:
@@ -86,8 +81,13 @@ def exact_first_hits(
     *,
     tmin: float = 0.0,
     tmax: float = math.inf,
+    tie_tolerance: float = 0.0,
 ) -> ExactHits:
     """The exact first hit of each ray ``origin + t direction``, ``tmin <= t <= tmax``.
+
+    With ``tie_tolerance`` > 0, triangles hit within that relative distance of the first
+    hit (``t <= t_first (1 + tol)``) are accepted too: vtkraycast treats hits closer than
+    its arithmetic can separate as ties (32 eps of the precision).
 
     A triangle is hit when the signed volumes ``det[B-O, C-O, d]``, ``det[C-O, A-O, d]``,
     ``det[A-O, B-O, d]`` share a sign (zeros allowed, not all zero) and their sum
@@ -116,9 +116,9 @@ def exact_first_hits(
     on_edge = np.zeros(n, bool)
     for k in range(n):
         o, d = origins[k], directions[k]
-        cand = _candidates(points, triangles, o, d, tmin, tmax, centres, radii)
+        cand = _candidates(o, d, tmin, tmax, centres, radii)
         best: Fraction | None = None
-        hits: list[tuple[int, Fraction, tuple[Fraction, Fraction, Fraction], bool]] = []
+        hits: list[tuple[int, Fraction, tuple[Fraction, Fraction, Fraction], bool]] = []  # all hits in range
         if cand.size:
             tri_pts = corners[cand].reshape(-1, 3)
             ints = _scaled_integers(np.concatenate((o, d, tri_pts.ravel())))
@@ -135,12 +135,14 @@ def exact_first_hits(
                 # t = (A . n) / (d . n) with n = (B - A) x (C - A) and d . n = wa + wb + wc;
                 # A . n = det[A, B, C] since A . (A x .) = 0. The common 2**shift cancels.
                 t = Fraction(_det(a, b, c), total)
-                if not (tmin <= t <= tmax) or (best is not None and t > best):
+                if not (tmin <= t <= tmax):
                     continue
-                if best is None or t < best:
-                    best, hits = t, []
                 weights = (Fraction(wa, total), Fraction(wb, total), Fraction(wc, total))
                 hits.append((tri, t, weights, 0 in (wa, wb, wc)))
+                best = t if best is None else min(best, t)
+        if hits:
+            reach = best + abs(best) * Fraction(float(tie_tolerance))
+            hits = [h for h in hits if h[1] <= reach]
         accepted.append(frozenset(h[0] for h in hits))
         if hits:
             first = min(hits)
