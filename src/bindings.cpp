@@ -149,8 +149,10 @@ void bind_precision(nb::module_& m) {
             spec.nx = nx;
             spec.ny = ny;
             spec.parallel = parallel;
-            return run<Real>(scene, vrc::CameraRays(spec), strategy, accel, backface_culling, triangle_id, depth,
-                             barycentric, threads, std::move(progress));
+            vrc::CameraRays rays(spec);
+            rays.restrict_to(scene.bounds);
+            return run<Real>(scene, rays, strategy, accel, backface_culling, triangle_id, depth, barycentric,
+                             threads, std::move(progress));
         },
         "scene"_a, "frame"_a, "d"_a, "width"_a, "height"_a, "near"_a, "far"_a, "nx"_a, "ny"_a, "parallel"_a,
         "strategy"_a, "accel"_a, "backface_culling"_a, "triangle_id"_a, "depth"_a.none(), "barycentric"_a.none(), "threads"_a,

@@ -4,6 +4,7 @@
 
 #include <cstddef>
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 
 #include "geometry.hpp"
@@ -66,9 +67,49 @@ class CameraRays {
             for (int64_t i = i0; i < std::min(i0 + kTile, c_.nx); ++i) f(std::size_t(i + r * c_.nx));
     }
 
+    /// The seed's bounding-volume test, per tile: project the scene's box into the image and
+    /// keep the pixel rectangle that can see it (a pixel of margin covers rounding). Tiles
+    /// outside it are misses without traversal. A box reaching behind a pinhole eye's plane
+    /// cannot be projected: then every tile stays.
+    void restrict_to(const Box& box) {
+        if (!(box.lo[0] <= box.hi[0])) {  // empty scene: nothing can be hit
+            i_lo_ = r_lo_ = 1;
+            i_hi_ = r_hi_ = 0;
+            return;
+        }
+        double lo_i = HUGE_VAL, hi_i = -HUGE_VAL, lo_r = HUGE_VAL, hi_r = -HUGE_VAL;
+        for (int corner = 0; corner < 8; ++corner) {
+            double rel[3];
+            for (int k = 0; k < 3; ++k) rel[k] = double((corner >> k & 1) ? box.hi[k] : box.lo[k]) - c_.eye[k];
+            double x = rel[0] * c_.u[0] + rel[1] * c_.u[1] + rel[2] * c_.u[2];
+            double y = rel[0] * c_.v[0] + rel[1] * c_.v[1] + rel[2] * c_.v[2];
+            if (!c_.parallel) {
+                const double depth = -(rel[0] * c_.w[0] + rel[1] * c_.w[1] + rel[2] * c_.w[2]);
+                if (!(depth > 1e-9 * (std::fabs(x) + std::fabs(y)))) return;  // reaches behind the eye
+                x *= c_.d / depth;
+                y *= c_.d / depth;
+            }
+            // pixel coordinates: column i, and row r counted from the bottom
+            const double i = (x + c_.width * 0.5) / (c_.width / double(c_.nx)) - 0.5;
+            const double r = (y + c_.height * 0.5) / (c_.height / double(c_.ny)) - 0.5;
+            lo_i = std::min(lo_i, i), hi_i = std::max(hi_i, i);
+            lo_r = std::min(lo_r, r), hi_r = std::max(hi_r, r);
+        }
+        const auto clamp = [](double v, int64_t n) { return int64_t(std::max(-1.0, std::min(double(n), v))); };
+        i_lo_ = clamp(std::floor(lo_i) - 1, c_.nx), i_hi_ = clamp(std::ceil(hi_i) + 1, c_.nx);
+        r_lo_ = clamp(std::floor(lo_r) - 1, c_.ny), r_hi_ = clamp(std::ceil(hi_r) + 1, c_.ny);
+    }
+
+    /// Whether any pixel of the tile may see the scene (see restrict_to).
+    [[nodiscard]] bool tile_may_hit(std::size_t tile) const {
+        const int64_t i0 = int64_t(tile) % tiles_x() * kTile, r0 = int64_t(tile) / tiles_x() * kTile;
+        return i0 <= i_hi_ && i0 + kTile - 1 >= i_lo_ && r0 <= r_hi_ && r0 + kTile - 1 >= r_lo_;
+    }
+
    private:
     [[nodiscard]] int64_t tiles_x() const { return (c_.nx + kTile - 1) / kTile; }
     CameraSpec c_;
+    int64_t i_lo_ = INT64_MIN / 2, i_hi_ = INT64_MAX / 2, r_lo_ = INT64_MIN / 2, r_hi_ = INT64_MAX / 2;
 };
 
 /// Rays from (n, 3) origin and direction arrays; the output is the ray parameter t.
@@ -95,6 +136,7 @@ class ArrayRays {
     void for_each_in_tile(std::size_t tile, F&& f) const {
         for (std::size_t k = tile * kChunk; k < std::min(n_, (tile + 1) * kChunk); ++k) f(k);
     }
+    [[nodiscard]] bool tile_may_hit(std::size_t) const { return true; }
 
    private:
     const double *o_, *d_;

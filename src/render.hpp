@@ -44,17 +44,24 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
     std::condition_variable finished;
     constexpr Real kNaN = std::numeric_limits<Real>::quiet_NaN();
 
+    auto store = [&](std::size_t k, const Ray& ray, const Hit<Real>& hit) {
+        const bool found = hit.found();
+        out.triangle_id[k] = found ? int64_t(scene.prim_ids[hit.prim]) : -1;
+        if (out.depth) out.depth[k] = found ? static_cast<Real>(ray.output(hit.t)) : kNaN;
+        if (out.barycentric)
+            for (int c = 0; c < 3; ++c) out.barycentric[3 * k + c] = found ? hit.b[c] : kNaN;
+    };
     auto work = [&] {
         for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
+            // The seed's bounding test, a whole tile at a time: tiles that cannot see the
+            // scene are misses without a single ray traversal.
+            const bool may_hit = rays.tile_may_hit(tile);
             rays.for_each_in_tile(tile, [&](std::size_t k) {
                 const Ray ray = rays.ray(k);
-                const Hit<Real> hit = kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, context)
-                                                  : closest_hit<Kernel, Real>(scene, ray, context);
-                const bool found = hit.found();
-                out.triangle_id[k] = found ? int64_t(scene.prim_ids[hit.prim]) : -1;
-                if (out.depth) out.depth[k] = found ? static_cast<Real>(ray.output(hit.t)) : kNaN;
-                if (out.barycentric)
-                    for (int c = 0; c < 3; ++c) out.barycentric[3 * k + c] = found ? hit.b[c] : kNaN;
+                if (!may_hit) return store(k, ray, Hit<Real>{});
+                store(k, ray,
+                      kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, context)
+                                  : closest_hit<Kernel, Real>(scene, ray, context));
             });
             if (done.fetch_add(1) + 1 == n_tiles) {
                 std::lock_guard<std::mutex> lock(mutex);

@@ -243,3 +243,25 @@ def test_ctrl_c_stops_a_cast_and_leaves_the_scene_usable(run_python):
     assert lines[0].startswith("interrupted after"), done.stdout
     assert float(lines[0].split()[-1]) < 2.0
     assert lines[1].startswith("usable") and int(lines[1].split()[1]) > 0
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+@pytest.mark.parametrize("look", [(0, 0, 0), (0.9, 0.6, 0), (1.6, 1.1, 0)])
+def test_tiles_outside_the_projected_bounds_are_skipped_exactly(parallel, look):
+    """Tiles whose rays cannot reach the scene's box are filled as misses without traversal:
+    the image equals the same rays cast one by one (no tile logic) for a mesh in the middle,
+    at the edge and in a corner of the frame."""
+    mesh = pv.Sphere(radius=0.3, theta_resolution=20, phi_resolution=20)
+    cam = vrc.Camera((look[0], look[1], 4), look, (0, 1, 0), view_angle=50, nx=131, ny=97, parallel=parallel)
+    scene = vrc.Scene(mesh)
+    image = scene.cast(cam, arrays=["TriangleId"])
+    rows, cols = np.arange(cam.ny).repeat(cam.nx), np.tile(np.arange(cam.nx), cam.ny)
+    c = np.array([cam.pixel_center(i, cam.ny - 1 - r) for i, r in zip(cols, rows)])
+    if parallel:
+        origins = cam.eye + c[:, :1] * cam.right + c[:, 1:2] * cam.up
+        directions = np.broadcast_to(-cam.backward, origins.shape)
+    else:
+        directions = c[:, :1] * cam.right + c[:, 1:2] * cam.up + c[:, 2:] * cam.backward
+        origins = np.broadcast_to(cam.eye, directions.shape)
+    np.testing.assert_array_equal(image["TriangleId"], scene.intersect(origins, directions)["triangle_id"])
+    assert 0 < (image["TriangleId"] >= 0).mean() < 0.5

@@ -41,6 +41,10 @@ def fill_image(
     image.SetSpacing(*spacing)
     image.SetDirectionMatrix(*direction.ravel())
     point_data = image.GetPointData()
+    # A pipeline reuses its output image, and vtkImageData::PrepareForNewData keeps the old
+    # active scalars (to reuse their memory): without this, the previous cast's Depth
+    # survived as the first array, or as a stale array of the old size when no longer asked for.
+    point_data.Initialize()
     for name, values in buffers.items():
         array = numpy_to_vtk(np.ascontiguousarray(values), deep=False)
         array.SetName(name)
