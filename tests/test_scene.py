@@ -252,7 +252,8 @@ def test_tiles_outside_the_projected_bounds_are_skipped_exactly(parallel, look):
     the image equals the same rays cast one by one (no tile logic) for a mesh in the middle,
     at the edge and in a corner of the frame."""
     mesh = pv.Sphere(radius=0.3, theta_resolution=20, phi_resolution=20)
-    cam = vrc.Camera((look[0], look[1], 4), look, (0, 1, 0), view_angle=50, nx=131, ny=97, parallel=parallel)
+    window = dict(h=2.0, parallel=True) if parallel else dict(view_angle=30)
+    cam = vrc.Camera((look[0], look[1], 4), look, (0, 1, 0), nx=131, ny=97, **window)
     scene = vrc.Scene(mesh)
     image = scene.cast(cam, arrays=["TriangleId"])
     rows, cols = np.arange(cam.ny).repeat(cam.nx), np.tile(np.arange(cam.nx), cam.ny)
