@@ -53,7 +53,9 @@ def _scaled_integers(values: np.ndarray) -> list[int]:
     return [int(i) << int(e + shift) if i else 0 for i, e in zip(ints.tolist(), exps.tolist())]
 
 
-def _candidates(o: np.ndarray, d: np.ndarray, tmin: float, tmax: float, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+def _candidates(
+    o: np.ndarray, d: np.ndarray, tmin: float, tmax: float, centres: np.ndarray, radii: np.ndarray
+) -> np.ndarray:
     """Triangles whose bounding sphere the ray may touch (a conservative float filter, in
     units of the direction's length so that tiny or huge directions cannot underflow)."""
     scale = float(np.abs(d).max())

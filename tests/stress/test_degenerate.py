@@ -68,7 +68,6 @@ def test_duplicates_and_coplanar_overlaps_go_to_the_lowest_triangle_id(strategy,
     # 0 and 2 are the same triangle with rotated point order, 1 overlaps both in the plane,
     # 3 repeats 1 with its points in reverse order (opposite normal).
     triangles = [[4, 5, 3], [1, 2, 0], [0, 1, 2], [5, 4, 3]]
-    mesh = mesh_of(points, triangles)
     origins, directions = grid_rays(0.25, 0.5, 0.15, 0.4, 11)  # inside all four
     for order in (triangles, triangles[::-1]):
         hits = vrc.Scene(mesh_of(points, order)).intersect(origins, directions, strategy=strategy, precision=precision)

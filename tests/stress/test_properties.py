@@ -64,7 +64,9 @@ def test_exact_strategies_match_the_exact_reference(case, precision):
     # on different edges) may go either way: accept any hit within 1e-12 (1e-5 for float32)
     # of the first one. Ties within 32 eps go to the lowest id.
     tie = 1e-12 if precision == "float64" else 1e-5
-    ref = exact_first_hits(scene.prepared.points, scene.prepared.triangles, origin[None], direction[None], tie_tolerance=tie)
+    ref = exact_first_hits(
+        scene.prepared.points, scene.prepared.triangles, origin[None], direction[None], tie_tolerance=tie
+    )
     masks = classify(ref, hits["triangle_id"])
     assert masks["correct"].all(), (ref.accepted, hits, mesh.points.tolist(), origin.tolist(), direction.tolist())
     tri = hits["triangle_id"][0]
@@ -74,7 +76,11 @@ def test_exact_strategies_match_the_exact_reference(case, precision):
         normal = np.cross(b - a, c - a)
         cos = abs(normal @ direction) / (np.linalg.norm(normal) * np.linalg.norm(direction))
         tol = (1e-9 if precision == "float64" else 1e-3) / max(cos, 1e-6)
-        assert abs(hits["t"][0] - ref.t[0]) <= tol * max(1.0, abs(ref.t[0])), (mesh.points.tolist(), origin.tolist(), direction.tolist())
+        assert abs(hits["t"][0] - ref.t[0]) <= tol * max(1.0, abs(ref.t[0])), (
+            mesh.points.tolist(),
+            origin.tolist(),
+            direction.tolist(),
+        )
 
 
 @EXAMPLES

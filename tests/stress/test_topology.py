@@ -30,7 +30,9 @@ def test_inconsistently_oriented_closed_mesh_does_not_leak(precision):
     faces[flip, 1:] = faces[flip, 1:][:, ::-1]
     flipped = pv.PolyData(mesh.points, faces=faces.ravel())
     scene = vrc.Scene(flipped)
-    origins, directions = rays_at_vertices_and_edges(scene.prepared.points, scene.prepared.triangles, [0.1, 0.05, -0.02])
+    origins, directions = rays_at_vertices_and_edges(
+        scene.prepared.points, scene.prepared.triangles, [0.1, 0.05, -0.02]
+    )
     ids = check_exact(scene, origins, directions, precision)
     assert (ids >= 0).all()
 
