@@ -47,9 +47,12 @@ class PreparedMesh:
 
 
 def _cells(cell_array: vtkCellArray) -> tuple[np.ndarray, np.ndarray]:
-    """Offsets and connectivity of a vtkCellArray as int64 numpy arrays (views when possible)."""
+    """Offsets and connectivity of a vtkCellArray as int64 numpy arrays (views when possible),
+    checked: a malformed array (say, a legacy cell list with negative counts) is refused."""
     offsets = vtk_to_numpy(cell_array.GetOffsetsArray()).astype(np.int64, copy=False)
     connectivity = vtk_to_numpy(cell_array.GetConnectivityArray()).astype(np.int64, copy=False)
+    if offsets.size and (offsets[0] != 0 or offsets[-1] != connectivity.size or (np.diff(offsets) < 0).any()):
+        raise ValueError("the mesh's cell array is malformed (its offsets do not describe its connectivity)")
     return offsets, connectivity
 
 

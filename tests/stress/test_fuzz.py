@@ -16,7 +16,8 @@ import vtkraycast as vrc
 
 ALLOWED = (ValueError, TypeError, MemoryError)
 TRIED = {"camera": 0, "cast": 0, "intersect": 0, "mesh": 0}
-FUZZ = settings(max_examples=400, deadline=None, suppress_health_check=list(HealthCheck))
+# Derandomized: CI sees the same inputs every run (explore more with --hypothesis-seed).
+FUZZ = settings(max_examples=400, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
 
 weird_float = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),
