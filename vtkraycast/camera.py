@@ -118,8 +118,13 @@ class Camera:
         if math.isnan(near) or math.isnan(far) or near < 0 or far <= near:
             raise ValueError(f"need 0 <= near < far, got near={near}, far={far}")
         forward = look_v - eye_v
-        if not np.linalg.norm(forward) > 0:
+        with np.errstate(over="ignore"):
+            distance = float(np.linalg.norm(forward))
+            up_length = float(np.linalg.norm(up_v))
+        if not distance > 0:
             raise ValueError("eye and look_at coincide: the view direction is undefined")
+        if not (math.isfinite(distance) and math.isfinite(up_length)):
+            raise ValueError("eye, look_at and view_up must be within 1e150 of each other (their distance overflows)")
         values = (eye_v, look_v, up_v, d, w, h, nx, ny, bool(parallel), near, far)
         for name, value in zip(self._FIELDS, values):
             if isinstance(value, np.ndarray):
