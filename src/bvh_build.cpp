@@ -12,7 +12,7 @@ namespace {
 
 constexpr int kBins = 16;
 constexpr uint32_t kMaxLeaf = 8;             // forced split above this many triangles
-constexpr float kTraversalCost = 1.0f;       // SAH cost of visiting a node, relative to one triangle test
+constexpr float kTraversalCost = 2.0f;  // SAH cost of a node visit, in triangle tests (frog: 2 builds ~15 % faster than 1, 20 % less memory)
 constexpr std::size_t kParallelGrain = 1u << 14;  // do not hand smaller subtrees to a new thread
 constexpr int kMaxSahDepth = 64;  // below this, median splits: depth stays < 96 (traversal stack 128)
 
