@@ -75,7 +75,9 @@ class Watertight : public PointKernel<Watertight<Real>> {
         // Rounding bound on tt: it grows as the terms cancel (a surface through the origin).
         double slack = 32 * double(std::numeric_limits<Real>::epsilon()) *
                        double((std::fabs(tu) + std::fabs(tv) + std::fabs(tw)) / std::fabs(det));
-        if (!(slack <= 1e-6 * std::fabs(tt))) plane_distance(pa, pb, pc, tt, slack);  // rare
+        // Rare: only when t kept fewer than about three good digits.
+        if (!(slack <= 1e3 * double(std::numeric_limits<Real>::epsilon()) * std::fabs(tt)))
+            plane_distance(pa, pb, pc, tt, slack);
         if (tmin == 0 && std::fabs(tt) <= slack) {
             // Is the plane in front of the origin or behind it? Within rounding of 0 (a
             // surface through the eye) the exact orientation of the origin decides:
