@@ -150,7 +150,7 @@ void bind_precision(nb::module_& m) {
             spec.ny = ny;
             spec.parallel = parallel;
             vrc::CameraRays rays(spec);
-            rays.restrict_to(scene.bounds);
+            rays.restrict_to(scene.bounds, scene.anchor);
             return run<Real>(scene, rays, strategy, accel, backface_culling, triangle_id, depth, barycentric,
                              threads, std::move(progress));
         },

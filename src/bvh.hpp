@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "exact_sign.hpp"
 #include "geometry.hpp"
 
 namespace vrc {
@@ -27,7 +28,10 @@ struct Scene {
     std::vector<uint32_t> triangles;  ///< (n_triangles, 3) point indices, in leaf order
     std::vector<uint32_t> prim_ids;   ///< leaf-order position -> input triangle index
     std::vector<Node> nodes;          ///< nodes[0] is the root; empty when there are no triangles
-    Box bounds;                       ///< box of all triangles (rounded outward)
+    /// Boxes are stored relative to this point (the centre of the triangles' bounding box), so
+    /// their single precision resolves the scene's own size, wherever it lies in the world.
+    double anchor[3] = {0, 0, 0};
+    Box bounds;                       ///< box of all triangles, relative to `anchor` (rounded outward)
     double sphere_center[3] = {0, 0, 0};  ///< the seed's bounding sphere: box centre...
     double sphere_radius = -1;            ///< ...and largest point distance to it (-1: empty)
 

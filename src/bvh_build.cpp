@@ -143,6 +143,16 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     scene.points.assign(points, points + 3 * n_points);
     if (n_triangles == 0) return scene;
 
+    // The anchor: the centre of the triangles' bounding box, in double.
+    double lo_all[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi_all[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    for (std::size_t i = 0; i < 3 * n_triangles; ++i)
+        for (int k = 0; k < 3; ++k) {
+            const double x = points[3 * std::size_t(triangles[i]) + k];
+            lo_all[k] = std::min(lo_all[k], x);
+            hi_all[k] = std::max(hi_all[k], x);
+        }
+    for (int k = 0; k < 3; ++k) scene.anchor[k] = 0.5 * lo_all[k] + 0.5 * hi_all[k];
+
     std::vector<PrimRef> refs(n_triangles);
     for (std::size_t i = 0; i < n_triangles; ++i) {
         PrimRef& r = refs[i];
@@ -153,8 +163,8 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
                 lo = std::min(lo, x);
                 hi = std::max(hi, x);
             }
-            r.box.lo[k] = round_down(lo);
-            r.box.hi[k] = round_up(hi);
+            r.box.lo[k] = relative_down(lo, scene.anchor[k]);
+            r.box.hi[k] = relative_up(hi, scene.anchor[k]);
             r.centroid[k] = 0.5f * (r.box.lo[k] + r.box.hi[k]);
         }
         r.id = static_cast<uint32_t>(i);
@@ -167,7 +177,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     scene.nodes.shrink_to_fit();
     scene.bounds = scene.nodes[0].box;
     double r2 = 0;
-    for (int k = 0; k < 3; ++k) scene.sphere_center[k] = 0.5 * (double(scene.bounds.lo[k]) + double(scene.bounds.hi[k]));
+    for (int k = 0; k < 3; ++k) scene.sphere_center[k] = scene.anchor[k];
     for (std::size_t i = 0; i < 3 * n_triangles; ++i) {
         const double* p = points + 3 * std::size_t(triangles[i]);
         double d2 = 0;

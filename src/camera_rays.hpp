@@ -67,11 +67,12 @@ class CameraRays {
             for (int64_t i = i0; i < std::min(i0 + kTile, c_.nx); ++i) f(std::size_t(i + r * c_.nx));
     }
 
-    /// The seed's bounding-volume test, per tile: project the scene's box into the image and
+    /// The seed's bounding-volume test, per tile: project the scene's box (given relative to
+    /// `anchor`) into the image and
     /// keep the pixel rectangle that can see it (a pixel of margin covers rounding). Tiles
     /// outside it are misses without traversal. A box reaching behind a pinhole eye's plane
     /// cannot be projected: then every tile stays.
-    void restrict_to(const Box& box) {
+    void restrict_to(const Box& box, const double anchor[3]) {
         if (!(box.lo[0] <= box.hi[0])) {  // empty scene: nothing can be hit
             i_lo_ = r_lo_ = 1;
             i_hi_ = r_hi_ = 0;
@@ -80,7 +81,8 @@ class CameraRays {
         double lo_i = HUGE_VAL, hi_i = -HUGE_VAL, lo_r = HUGE_VAL, hi_r = -HUGE_VAL;
         for (int corner = 0; corner < 8; ++corner) {
             double rel[3];
-            for (int k = 0; k < 3; ++k) rel[k] = double((corner >> k & 1) ? box.hi[k] : box.lo[k]) - c_.eye[k];
+            for (int k = 0; k < 3; ++k)
+                rel[k] = (anchor[k] - c_.eye[k]) + double((corner >> k & 1) ? box.hi[k] : box.lo[k]);
             double x = rel[0] * c_.u[0] + rel[1] * c_.u[1] + rel[2] * c_.u[2];
             double y = rel[0] * c_.v[0] + rel[1] * c_.v[1] + rel[2] * c_.v[2];
             if (!c_.parallel) {

@@ -45,6 +45,21 @@ inline float round_up(double x) {
     return static_cast<double>(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
 }
 
+/// Float bounds of x - a, rounded outward: below and above the exact difference, which the
+/// double subtraction alone could miss by its own rounding (`err`, from a two-difference).
+inline float relative_down(double x, double a) {
+    const double d = x - a, bv = x - d, err = (x - (d + bv)) + (bv - a);  // d + err == x - a exactly
+    float f = round_down(d);
+    if (static_cast<double>(f) - d > err) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
+    return f;
+}
+inline float relative_up(double x, double a) {
+    const double d = x - a, bv = x - d, err = (x - (d + bv)) + (bv - a);
+    float f = round_up(d);
+    if (static_cast<double>(f) - d < err) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+    return f;
+}
+
 /// A ray in world space. The origin stays in double precision whatever the kernel's
 /// precision, so kernels can subtract it from the vertices before rounding (work relative
 /// to the ray origin, not to the world origin). `t` is in units of `dir`'s length;

@@ -63,9 +63,10 @@ class Watertight : public PointKernel<Watertight<Real>> {
         // Magnitudes of the sheared coordinates, for the error bounds of the edge functions.
         const Real mx[3] = {magnitude(a, kx_, sx_), magnitude(bb, kx_, sx_), magnitude(c, kx_, sx_)};
         const Real my[3] = {magnitude(a, ky_, sy_), magnitude(bb, ky_, sy_), magnitude(c, ky_, sy_)};
-        u = exact_if_close(u, mx[2] * my[1] + my[2] * mx[1], pc, pb);
-        v = exact_if_close(v, mx[0] * my[2] + my[0] * mx[2], pa, pc);
-        w = exact_if_close(w, mx[1] * my[0] + my[1] * mx[0], pb, pa);
+        bool snapped = false;  // an edge function kept its exact sign but not its size
+        u = exact_if_close(u, mx[2] * my[1] + my[2] * mx[1], pc, pb, snapped);
+        v = exact_if_close(v, mx[0] * my[2] + my[0] * mx[2], pa, pc, snapped);
+        w = exact_if_close(w, mx[1] * my[0] + my[1] * mx[0], pb, pa, snapped);
         if ((u < 0 || v < 0 || w < 0) && (u > 0 || v > 0 || w > 0)) return false;
         const Real det = u + v + w;  // > 0 when the triangle faces the ray origin
         if (det == 0 || (cull_ && det < 0)) return false;
@@ -75,8 +76,9 @@ class Watertight : public PointKernel<Watertight<Real>> {
         // Rounding bound on tt: it grows as the terms cancel (a surface through the origin).
         double slack = 32 * double(std::numeric_limits<Real>::epsilon()) *
                        double((std::fabs(tu) + std::fabs(tv) + std::fabs(tw)) / std::fabs(det));
-        // Rare: only when t kept fewer than about three good digits.
-        if (!(slack <= 1e3 * double(std::numeric_limits<Real>::epsilon()) * std::fabs(tt)))
+        // Rare: when t kept fewer than about three good digits, or when an edge function's
+        // size was lost (its sign settled exactly), which would snap t to a vertex's depth.
+        if (snapped || !(slack <= 1e3 * double(std::numeric_limits<Real>::epsilon()) * std::fabs(tt)))
             plane_distance(pa, pb, pc, tt, slack);
         if (tmin == 0 && std::fabs(tt) <= slack) {
             // Is the plane in front of the origin or behind it? Within rounding of 0 (a
@@ -125,11 +127,13 @@ class Watertight : public PointKernel<Watertight<Real>> {
     /// Each sheared coordinate carries at most about 4 eps relative to its magnitude
     /// (rounding of p - O to Real, of the shear and of its product and difference), so
     /// |e - exact| <= ~10 eps * scale; 32 eps leaves a wide margin.
-    [[nodiscard]] Real exact_if_close(Real e, Real scale, const double* p, const double* q) const {
+    [[nodiscard]] Real exact_if_close(Real e, Real scale, const double* p, const double* q, bool& snapped) const {
         constexpr Real kBound = 32 * std::numeric_limits<Real>::epsilon() / 2;
         if (std::fabs(e) > kBound * scale) return e;
         const int sign = sign_of_edge(p, q);
         if (sign == 0) return Real(0);
+        const bool agrees = (e > 0) == (sign > 0) && e != 0;
+        snapped = snapped || !agrees;
         const Real size = e != 0 ? std::fabs(e) : std::numeric_limits<Real>::denorm_min();
         return sign > 0 ? size : -size;
     }

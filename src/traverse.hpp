@@ -13,19 +13,22 @@
 namespace vrc {
 
 /// Ray-box slab test made conservative as in Ize, "Robust BVH Ray Traversal" (JCGT 2013):
-/// each slab distance carries at most gamma(3) relative error, so the far distance is
-/// widened by 1 + 2 gamma(3). NaN slab distances (origin on a slab of a zero direction
-/// component) are ignored rather than rejecting the box.
+/// each slab distance carries at most gamma(4) relative error, so the far distance is
+/// widened by 1 + 2 gamma(4). Boxes are relative to the scene's anchor; the ray origin
+/// relative to it is kept exactly as two doubles (hi + lo), so the slab distance
+/// ((b - hi) - lo) / d has four roundings (gamma(3) in Ize's paper, one more here). NaN slab
+/// distances (origin on a slab of a zero direction component) are ignored rather than
+/// rejecting the box.
 struct BoxTester {
-    double org[3];
+    double org_hi[3], org_lo[3];
     double inv[3];
     int near_is_hi[3];
     static constexpr double kUlp = std::numeric_limits<double>::epsilon() / 2;
-    static constexpr double kWiden = 1.0 + 2.0 * (3 * kUlp / (1 - 3 * kUlp));
+    static constexpr double kWiden = 1.0 + 2.0 * (4 * kUlp / (1 - 4 * kUlp));
 
-    explicit BoxTester(const Ray& ray) {
+    BoxTester(const Ray& ray, const double anchor[3]) {
         for (int k = 0; k < 3; ++k) {
-            org[k] = ray.org[k];
+            exact::two_diff(ray.org[k], anchor[k], org_hi[k], org_lo[k]);
             inv[k] = 1.0 / ray.dir[k];
             near_is_hi[k] = std::signbit(inv[k]);
         }
@@ -37,8 +40,8 @@ struct BoxTester {
         for (int k = 0; k < 3; ++k) {
             const double lo = near_is_hi[k] ? box.hi[k] : box.lo[k];
             const double hi = near_is_hi[k] ? box.lo[k] : box.hi[k];
-            const double tn = (lo - org[k]) * inv[k];
-            const double tf = (hi - org[k]) * inv[k] * kWiden;
+            const double tn = ((lo - org_hi[k]) - org_lo[k]) * inv[k];
+            const double tf = ((hi - org_hi[k]) - org_lo[k]) * inv[k] * kWiden;
             t0 = tn > t0 ? tn : t0;  // written so that NaN leaves the bound unchanged
             t1 = tf < t1 ? tf : t1;
         }
@@ -97,7 +100,8 @@ template <template <class> class Kernel, class Real>
 Hit<Real> brute_force_hit(const Scene& scene, const Ray& ray, const CastContext& context) {
     Hit<Real> hit;
     if (!may_hit_sphere(scene, ray)) return hit;
-    if (BoxTester(ray).enter(scene.bounds, ray.tmin, ray.tmax) == std::numeric_limits<double>::infinity()) return hit;
+    if (BoxTester(ray, scene.anchor).enter(scene.bounds, ray.tmin, ray.tmax) == std::numeric_limits<double>::infinity())
+        return hit;
     const Kernel<Real> kernel(ray, context);
     double bound = ray.tmax;
     for (uint32_t i = 0, n = uint32_t(scene.n_triangles()); i < n; ++i) test_triangle(kernel, scene, i, ray.tmin, bound, hit);
@@ -110,7 +114,7 @@ template <template <class> class Kernel, class Real>
 Hit<Real> closest_hit(const Scene& scene, const Ray& ray, const CastContext& context) {
     Hit<Real> hit;
     if (scene.nodes.empty()) return hit;
-    const BoxTester boxes(ray);
+    const BoxTester boxes(ray, scene.anchor);
     if (boxes.enter(scene.nodes[0].box, ray.tmin, ray.tmax) == std::numeric_limits<double>::infinity()) return hit;
     const Kernel<Real> kernel(ray, context);
     double bound = ray.tmax;
