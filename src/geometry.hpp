@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstring>
 #include <cstdint>
 #include <limits>
 
@@ -72,7 +73,12 @@ struct Ray {
     double t_unit = 1.0;  ///< output = t * t_unit * 2**t_exponent
     int t_exponent = 0;
 
-    [[nodiscard]] double output(double t) const { return std::ldexp(t * t_unit, t_exponent); }
+    [[nodiscard]] double output(double t) const {
+        const double scaled = t * t_unit;
+        return (t_exponent > -500 && t_exponent < 500 && std::fabs(scaled) < 0x1p500 && std::fabs(scaled) > 0x1p-500)
+                   ? scaled * power_of_two(t_exponent)
+                   : std::ldexp(scaled, t_exponent);
+    }
 
     /// Scales `dir` by a power of two (exactly) so that its largest component lies in
     /// [1, 2), with tmin, tmax and the output scale to match: directions of any magnitude,
@@ -80,11 +86,33 @@ struct Ray {
     void normalize_direction() {
         const double m = std::fmax(std::fabs(dir[0]), std::fmax(std::fabs(dir[1]), std::fabs(dir[2])));
         if (!(m > 0) || !std::isfinite(m)) return;
+        if (m >= 0x1p-500 && m < 0x1p500) {
+            // The common case without libm calls (they showed in profiles): the exponent from
+            // the bits, and multiplications by exact powers of two that cannot under- or
+            // overflow the direction here.
+            uint64_t bits;
+            std::memcpy(&bits, &m, sizeof bits);
+            const int e = int((bits >> 52) & 0x7ff) - 1023;
+            const double down = power_of_two(-e), up = power_of_two(e);
+            for (double& c : dir) c *= down;
+            tmin *= up;
+            tmax *= up;
+            t_exponent = -e;
+            return;
+        }
         const int e = std::ilogb(m);
         for (double& c : dir) c = std::ldexp(c, -e);
         tmin = std::ldexp(tmin, e);
         tmax = std::ldexp(tmax, e);
         t_exponent = -e;
+    }
+
+    /// 2**e for |e| <= 1022, built from its bits.
+    static double power_of_two(int e) {
+        const uint64_t bits = uint64_t(e + 1023) << 52;
+        double x;
+        std::memcpy(&x, &bits, sizeof x);
+        return x;
     }
 };
 
