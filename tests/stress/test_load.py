@@ -70,3 +70,32 @@ def test_memory_stays_flat_over_hundreds_of_casts(scene):
     growth = resident_bytes() - before
     print("resident MB every 50 casts:", [round(s / 2**20, 1) for s in samples], "growth", growth / 2**20)
     assert growth < 8 * 2**20
+
+
+def test_a_mesh_modified_during_casts_changes_nothing_already_built():
+    """The Scene owns a copy of the mesh: another thread rewriting the mesh's points while
+    casts run cannot change their results (nor crash them); a new Scene sees the change."""
+    import threading
+
+    mesh = pv.Sphere(theta_resolution=60, phi_resolution=60)
+    scene = vrc.Scene(mesh)
+    cam = vrc.Camera((0, 0, 3), (0, 0, 0), (0, 1, 0), nx=120, ny=90)
+    expected = scene.cast(cam, arrays=["TriangleId", "Depth"])
+    stop = threading.Event()
+
+    def scribble():
+        rng = np.random.default_rng(0)
+        while not stop.is_set():
+            mesh.points[:] = rng.normal(size=mesh.points.shape)
+
+    writer = threading.Thread(target=scribble)
+    writer.start()
+    try:
+        for _ in range(20):
+            got = scene.cast(cam, arrays=["TriangleId", "Depth"])
+            np.testing.assert_array_equal(got["TriangleId"], expected["TriangleId"])
+            np.testing.assert_array_equal(got["Depth"], expected["Depth"])
+        vrc.Scene(mesh)  # building from a mesh being rewritten: some snapshot, no crash
+    finally:
+        stop.set()
+        writer.join()
