@@ -26,7 +26,7 @@ import vtkraycast as vrc
 from vtkraycast.testing import camera_rays
 
 sys.path.insert(0, str(Path(__file__).parent))
-from runtime_vs_error import make_peers  # noqa: E402 - the peers' adapters live there
+from runtime_vs_error import make_peers
 
 
 def resident() -> int:
@@ -62,8 +62,19 @@ def main() -> None:
         times.append(time.perf_counter() - start)
     ours = float(np.median(times))
     ids = np.asarray(image["TriangleId"])
-    rows = [("vtkraycast (auto, float64)", os.cpu_count(), build, build + first, ours, 1.0, 1.0,
-             scene.memory_bytes / scene.n_triangles, grown / scene.n_triangles)]
+    rows = [
+        (
+            "vtkraycast (auto, float64)",
+            os.cpu_count(),
+            build,
+            build + first,
+            ours,
+            1.0,
+            1.0,
+            scene.memory_bytes / scene.n_triangles,
+            grown / scene.n_triangles,
+        )
+    ]
     print(rows[-1], flush=True)
 
     origins, directions = camera_rays(cam)
@@ -86,22 +97,35 @@ def main() -> None:
             times.append(time.perf_counter() - start)
         theirs = float(np.median(times))
         agree = float(np.mean(peer.collect(out).ids == ids))
-        rows.append((peer.name, peer.threads, peer_build, peer_build + peer_first, theirs, ours / theirs, agree,
-                     float("nan"), grown / scene.n_triangles))
+        rows.append(
+            (
+                peer.name,
+                peer.threads,
+                peer_build,
+                peer_build + peer_first,
+                theirs,
+                ours / theirs,
+                agree,
+                float("nan"),
+                grown / scene.n_triangles,
+            )
+        )
         print(rows[-1], flush=True)
 
     lines = [
         f"`python benchmarks/peers.py --pixels {n}` on {machine}: frog contour "
         f"({scene.n_triangles:,} triangles), {n}x{n} camera rays, medians of {args.repeats}.",
         "",
-        "| caster | threads | build s | first image s | cast s | Mrays/s | cast time vs vtkraycast | TriangleId agreement "
-        "| structure bytes/triangle | resident growth bytes/triangle |",
+        "| caster | threads | build s | first image s | cast s | Mrays/s | cast time vs vtkraycast "
+        "| TriangleId agreement | structure bytes/triangle | resident growth bytes/triangle |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for name, threads, b, f, c, ratio, agree, mem, grown in rows:
         mem_text = "-" if np.isnan(mem) else f"{mem:.1f}"
-        lines.append(f"| {name} | {threads} | {b:.3f} | {f:.3f} | {c:.4f} | {rays / c / 1e6:.2f} | {1 / ratio:.2f}x "
-                     f"| {agree:.4%} | {mem_text} | {grown:.0f} |")
+        lines.append(
+            f"| {name} | {threads} | {b:.3f} | {f:.3f} | {c:.4f} | {rays / c / 1e6:.2f} | {1 / ratio:.2f}x "
+            f"| {agree:.4%} | {mem_text} | {grown:.0f} |"
+        )
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "peers.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -29,7 +29,7 @@ def peak_mib() -> float:
 
 
 def height_field(n_triangles: int) -> pv.PolyData:
-    side = int(math.ceil(math.sqrt(n_triangles / 2)))
+    side = math.ceil(math.sqrt(n_triangles / 2))
     mesh = pv.Plane(i_size=1, j_size=1, i_resolution=side, j_resolution=side)
     p = mesh.points
     p[:, 2] = 0.05 * np.sin(40 * p[:, 0]) * np.cos(30 * p[:, 1])
@@ -42,7 +42,9 @@ def main() -> None:
     parser.add_argument("--pixels", type=int, default=8192)
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args()
-    machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    machine = (
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    )
     print(machine)
 
     t = time.perf_counter()
@@ -54,7 +56,9 @@ def main() -> None:
     scene = vrc.Scene(mesh)
     build = time.perf_counter() - t
     del mesh  # the scene keeps its own copy
-    print(f"scene: {build:.1f} s, {scene.memory_bytes / scene.n_triangles:.1f} bytes/triangle, peak {peak_mib():.0f} MiB")
+    print(
+        f"scene: {build:.1f} s, {scene.memory_bytes / scene.n_triangles:.1f} bytes/triangle, peak {peak_mib():.0f} MiB"
+    )
 
     n = args.pixels
     cam = vrc.Camera((0.3, -0.9, 0.8), (0, 0, 0), (0, 0, 1), view_angle=45, nx=n, ny=n)

@@ -28,7 +28,7 @@ from vtkraycast.testing import bumpy_sphere, camera_rays, integer_grid, rays_at_
 from vtkraycast.validate import classify, exact_first_hits
 
 sys.path.insert(0, str(Path(__file__).parent))
-from runtime_vs_error import make_peers  # noqa: E402 - the peers' adapters live there
+from runtime_vs_error import make_peers
 
 Scenario = tuple[pv.PolyData, np.ndarray, np.ndarray]
 
@@ -70,7 +70,8 @@ def slivers(aspect: float) -> Callable[[], Scenario]:
         ys = np.linspace(0, n * aspect, n + 1)
         points = np.array([[0, 0, 0]] + [[1, y, 0] for y in ys], float)
         faces = np.array([[3, 0, k + 1, k + 2] for k in range(n)]).ravel()
-        origins = np.array([[x, x * y, 1.0] for x in np.linspace(0.1, 0.9, 20) for y in np.linspace(0, n * aspect, 22)[1:-1]])
+        heights = np.linspace(0, n * aspect, 22)[1:-1]
+        origins = np.array([[x, x * y, 1.0] for x in np.linspace(0.1, 0.9, 20) for y in heights])
         return pv.PolyData(points, faces=faces), origins, np.broadcast_to([0.0, 0.0, -1.0], origins.shape).copy()
 
     return make
@@ -116,6 +117,7 @@ def vtkraycast_methods() -> list[tuple[str, Callable[[vrc.Scene, np.ndarray, np.
     methods = []
     for strategy in vrc.STRATEGIES:
         for precision in ("float64", "float32"):
+
             def run(scene, o, d, strategy=strategy, precision=precision):
                 hits = scene.intersect(o, d, strategy=strategy, precision=precision)
                 return hits["triangle_id"], hits["t"]
@@ -147,9 +149,17 @@ def main() -> None:
             masks = classify(ref, ids)
             good = masks["correct"] & (ids >= 0)
             err = np.abs(t[good] - ref.t[good]) / np.maximum(np.abs(ref.t[good]), 1e-300)
-            rows.append(dict(scenario=name, rays=len(origins), method=label, leaks=int(masks["leak"].sum()),
-                             wrong=int(masks["wrong"].sum()), false_hits=int(masks["false_hit"].sum()),
-                             t_error=float(err.max()) if err.size else 0.0))
+            rows.append(
+                dict(
+                    scenario=name,
+                    rays=len(origins),
+                    method=label,
+                    leaks=int(masks["leak"].sum()),
+                    wrong=int(masks["wrong"].sum()),
+                    false_hits=int(masks["false_hit"].sum()),
+                    t_error=float(err.max()) if err.size else 0.0,
+                )
+            )
         print(f"{name}: {len(origins)} rays, {scene.n_triangles} triangles", flush=True)
     wall = time.perf_counter() - start
 
