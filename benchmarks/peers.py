@@ -26,7 +26,7 @@ import vtkraycast as vrc
 from vtkraycast.testing import camera_rays
 
 sys.path.insert(0, str(Path(__file__).parent))
-from runtime_vs_error import make_peers
+from peer_casters import make_peers, more_peers
 
 
 def resident() -> int:
@@ -38,6 +38,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pixels", type=int, default=1024)
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--sample", type=int, default=2000, help="rays for the per-ray Python loops")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args()
     machine = f"{platform.platform()}, {os.cpu_count()} cores"
@@ -79,13 +80,16 @@ def main() -> None:
 
     origins, directions = camera_rays(cam)
     points, triangles = scene.prepared.points, scene.prepared.triangles
-    for peer in make_peers():
+    rng = np.random.default_rng(1)
+    sample = np.sort(rng.choice(rays, size=min(rays, args.sample), replace=False))
+    for peer in make_peers() + more_peers():
+        chosen = sample if getattr(peer, "sampled", False) else np.arange(rays)
         before = resident()
         start = time.perf_counter()
         peer.build(points, triangles)
         peer_build = time.perf_counter() - start
         grown = resident() - before
-        prepared = peer.prepare(origins, directions)
+        prepared = peer.prepare(origins[chosen], directions[chosen])
         start = time.perf_counter()
         out = peer.run(prepared)
         peer_first = time.perf_counter() - start
@@ -96,15 +100,18 @@ def main() -> None:
             out = peer.run(prepared)
             times.append(time.perf_counter() - start)
         theirs = float(np.median(times))
-        agree = float(np.mean(peer.collect(out).ids == ids))
+        agree = float(np.mean(peer.collect(out).ids == ids[chosen]))
+        scale = rays / len(chosen)  # a sampled peer's times, scaled to the whole image
+        label = peer.name + ("" if len(chosen) == rays else f" [{len(chosen)} rays sampled]")
+        cast = theirs * scale
         rows.append(
             (
-                peer.name,
+                label,
                 peer.threads,
                 peer_build,
-                peer_build + peer_first,
-                theirs,
-                ours / theirs,
+                peer_build + peer_first * scale,
+                cast,
+                ours / cast,
                 agree,
                 float("nan"),
                 grown / scene.n_triangles,

@@ -28,7 +28,7 @@ from vtkraycast.testing import bumpy_sphere, camera_rays, integer_grid, rays_at_
 from vtkraycast.validate import classify, exact_first_hits
 
 sys.path.insert(0, str(Path(__file__).parent))
-from runtime_vs_error import make_peers
+from peer_casters import make_peers
 
 Scenario = tuple[pv.PolyData, np.ndarray, np.ndarray]
 
