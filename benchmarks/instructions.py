@@ -1,0 +1,65 @@
+#!/usr/bin/env python
+"""Instructions per ray, counted by valgrind's callgrind: unlike timings, the count repeats
+exactly on a shared, noisy machine, so it measures small changes to the core.
+
+    python benchmarks/instructions.py [--pixels 512] [--arrays TriangleId]
+
+The frog contour (1.5 M triangles) is written once to a temporary file; a child process
+under callgrind loads it, builds the scene (not counted) and casts once from the iso camera
+of benchmarks/peers.py on one thread, counting only the cast's worker (functions whose name
+contains ``render``; the core keeps its symbols for this). Prints instructions per ray.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+CHILD = """
+import sys
+import pyvista as pv
+import vtkraycast as vrc
+mesh = pv.read(sys.argv[1])
+n = int(sys.argv[2])
+camera = vrc.Camera.framing(mesh.bounds, view="iso", nx=n, ny=n)
+scene = vrc.Scene(mesh, threads=1)
+scene.cast(camera, arrays=sys.argv[3].split(","), threads=1)
+"""
+
+
+def count(mesh_file: Path, pixels: int, arrays: str, workdir: Path) -> int:
+    out = workdir / "callgrind.out"
+    run = subprocess.run(
+        ["valgrind", "--tool=callgrind", "--collect-atstart=no", "--toggle-collect=*render*",
+         f"--callgrind-out-file={out}", sys.executable, "-c", CHILD, str(mesh_file), str(pixels), arrays],
+        capture_output=True, text=True, cwd=workdir,  # not the checkout: the installed package
+    )
+    if run.returncode != 0:
+        sys.exit(run.stderr[-3000:])
+    totals = re.search(r"^(?:summary|totals): (\d+)", out.read_text(), re.MULTILINE)
+    return int(totals.group(1))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pixels", type=int, default=512)
+    parser.add_argument("--arrays", default="TriangleId", help="comma-separated output arrays")
+    args = parser.parse_args()
+    from pyvista import examples
+
+    with tempfile.TemporaryDirectory() as tmp:
+        workdir = Path(tmp)
+        mesh_file = workdir / "frog.vtp"
+        examples.load_frog_tissues().contour_labels().save(mesh_file)
+        instructions = count(mesh_file, args.pixels, args.arrays, workdir)
+    rays = args.pixels**2
+    print(f"frog contour, {args.pixels}x{args.pixels}, {args.arrays}: {instructions} instructions, "
+          f"{instructions / rays:.0f} per ray")
+
+
+if __name__ == "__main__":
+    main()
