@@ -34,7 +34,7 @@ scene.cast(camera, arrays=sys.argv[3].split(","), threads=1)
 def count(mesh_file: Path, pixels: int, arrays: str, workdir: Path) -> int:
     out = workdir / "callgrind.out"
     run = subprocess.run(
-        ["valgrind", "--tool=callgrind", "--collect-atstart=no", "--toggle-collect=*render*",
+        ["valgrind", "--tool=callgrind", "--collect-atstart=no", "--toggle-collect=std::thread::_State_impl*vrc::render*",
          f"--callgrind-out-file={out}", sys.executable, "-c", CHILD, str(mesh_file), str(pixels), arrays],
         capture_output=True, text=True, cwd=workdir,  # not the checkout: the installed package
     )

@@ -62,10 +62,62 @@ class CameraRays {
     [[nodiscard]] std::size_t n_tiles() const { return std::size_t(tiles_x() * ((c_.ny + kTile - 1) / kTile)); }
     template <class F>
     void for_each_in_tile(std::size_t tile, F&& f) const {
-        const int64_t i0 = int64_t(tile) % tiles_x() * kTile, r0 = int64_t(tile) / tiles_x() * kTile;
-        for (int64_t r = r0; r < std::min(r0 + kTile, c_.ny); ++r)
-            for (int64_t i = i0; i < std::min(i0 + kTile, c_.nx); ++i) f(std::size_t(i + r * c_.nx));
+        const TilePixels p = tile_pixels(tile);
+        for (int64_t r = p.r0; r <= p.r1; ++r)
+            for (int64_t i = p.i0; i <= p.i1; ++i) f(std::size_t(i + r * c_.nx));
     }
+
+    /// A tile's columns i0..i1 and rows r0..r1 (inclusive).
+    struct TilePixels {
+        int64_t i0, i1, r0, r1;
+    };
+    [[nodiscard]] TilePixels tile_pixels(std::size_t tile) const {
+        const int64_t i0 = int64_t(tile) % tiles_x() * kTile, r0 = int64_t(tile) / tiles_x() * kTile;
+        return {i0, std::min(i0 + kTile, c_.nx) - 1, r0, std::min(r0 + kTile, c_.ny) - 1};
+    }
+
+    /// Pixel coordinates of a point as ratios of linear forms of q = P - eye: column
+    /// (col.q + col0) / (den.q + den0), row likewise; pixel (i, r)'s ray passes through
+    /// column i, row r. The denominator is the depth for a pinhole, 1 for a parallel camera.
+    /// `margin` (pixels) bounds how far a ray strays from its pixel centre by rounding (of
+    /// its direction, or of its origin for a parallel camera) plus the rounding of the
+    /// projection itself for points with den > kMinDen |q|_1.
+    struct PixelMap {
+        double col[3], row[3], den[3], depth[3];
+        double col0, row0, den0, margin;
+        static constexpr double kMinDen = 1e-3;
+    };
+    [[nodiscard]] PixelMap pixel_map() const {
+        PixelMap m{};
+        const double nx = double(c_.nx), ny = double(c_.ny), eps = std::numeric_limits<double>::epsilon();
+        const double per_x = nx / c_.width, per_y = ny / c_.height;  // pixels per unit of the image plane
+        for (int k = 0; k < 3; ++k) {
+            m.depth[k] = -c_.w[k];
+            if (c_.parallel) {
+                m.col[k] = per_x * c_.u[k];
+                m.row[k] = per_y * c_.v[k];
+                m.den[k] = 0;
+            } else {
+                m.col[k] = c_.d * per_x * c_.u[k] - (nx * 0.5 - 0.5) * c_.w[k];
+                m.row[k] = c_.d * per_y * c_.v[k] - (ny * 0.5 - 0.5) * c_.w[k];
+                m.den[k] = -c_.w[k];
+            }
+        }
+        const double per = std::max(per_x, per_y);
+        const double eye = std::max(std::fabs(c_.eye[0]), std::max(std::fabs(c_.eye[1]), std::fabs(c_.eye[2])));
+        if (c_.parallel) {
+            m.col0 = nx * 0.5 - 0.5;
+            m.row0 = ny * 0.5 - 0.5;
+            m.den0 = 1;
+            m.margin = 1e-3 + 64 * eps * (eye + c_.width + c_.height) * per;
+        } else {
+            m.col0 = m.row0 = m.den0 = 0;
+            const double scale = c_.width + c_.height + c_.d;
+            m.margin = 1e-3 + 64 * eps * scale * per + 1e4 * eps * (nx + ny) * (1 + c_.d * per);
+        }
+        return m;
+    }
+    [[nodiscard]] const CameraSpec& spec() const { return c_; }
 
     /// The seed's bounding-volume test, per tile: project the scene's box (given relative to
     /// `anchor`) into the image and
@@ -104,8 +156,8 @@ class CameraRays {
 
     /// Whether any pixel of the tile may see the scene (see restrict_to).
     [[nodiscard]] bool tile_may_hit(std::size_t tile) const {
-        const int64_t i0 = int64_t(tile) % tiles_x() * kTile, r0 = int64_t(tile) / tiles_x() * kTile;
-        return i0 <= i_hi_ && i0 + kTile - 1 >= i_lo_ && r0 <= r_hi_ && r0 + kTile - 1 >= r_lo_;
+        const TilePixels p = tile_pixels(tile);
+        return p.i0 <= i_hi_ && p.i1 >= i_lo_ && p.r0 <= r_hi_ && p.r1 >= r_lo_;
     }
 
    private:

@@ -13,7 +13,10 @@
 #include <thread>
 #include <vector>
 
+#include <type_traits>
+
 #include "traverse.hpp"
+#include "traverse_tile.hpp"
 
 namespace vrc {
 
@@ -29,6 +32,14 @@ struct Outputs {
 /// Called about every 50 ms from the calling thread with (tiles done, tiles total);
 /// returning false aborts the cast between tiles.
 using Poll = std::function<bool(std::size_t, std::size_t)>;
+
+template <bool kTiles, template <class> class Kernel, class Real, class Rays>
+auto make_tracer(const Scene& scene, const Rays& rays, const CastContext& context) {
+    if constexpr (kTiles)
+        return TileTracer<Kernel, Real>(scene, rays, context);
+    else
+        return 0;
+}
 
 /// Casts every ray of `rays`, tiles shared among `threads` workers, through the BVH (or,
 /// with kBruteForce, the seed's sphere-box-every-triangle method), optionally skipping
@@ -51,18 +62,27 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         if (out.barycentric)
             for (int c = 0; c < 3; ++c) out.barycentric[3 * k + c] = found ? hit.b[c] : kNaN;
     };
+    auto trace_rays = [&](std::size_t tile) {
+        // The seed's bounding test, a whole tile at a time: tiles that cannot see the
+        // scene are misses without a single ray traversal.
+        const bool may_hit = rays.tile_may_hit(tile);
+        rays.for_each_in_tile(tile, [&](std::size_t k) {
+            const Ray ray = rays.ray(k);
+            if (!may_hit) return store(k, ray, Hit<Real>{});
+            store(k, ray,
+                  kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, context)
+                              : closest_hit<Kernel, Real>(scene, ray, context));
+        });
+    };
+    // Camera rays through the BVH go a tile at a time (traverse_tile.hpp).
+    constexpr bool kTiles = std::is_same_v<Rays, CameraRays> && !kBruteForce;
     auto work = [&] {
+        std::conditional_t<kTiles, TileTracer<Kernel, Real>, int> tracer = make_tracer<kTiles, Kernel, Real>(scene, rays, context);
         for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
-            // The seed's bounding test, a whole tile at a time: tiles that cannot see the
-            // scene are misses without a single ray traversal.
-            const bool may_hit = rays.tile_may_hit(tile);
-            rays.for_each_in_tile(tile, [&](std::size_t k) {
-                const Ray ray = rays.ray(k);
-                if (!may_hit) return store(k, ray, Hit<Real>{});
-                store(k, ray,
-                      kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, context)
-                                  : closest_hit<Kernel, Real>(scene, ray, context));
-            });
+            if constexpr (kTiles)
+                tracer.trace(tile, store);
+            else
+                trace_rays(tile);
             if (done.fetch_add(1) + 1 == n_tiles) {
                 std::lock_guard<std::mutex> lock(mutex);
                 finished.notify_all();
