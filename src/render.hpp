@@ -33,10 +33,18 @@ struct Outputs {
 /// returning false aborts the cast between tiles.
 using Poll = std::function<bool(std::size_t, std::size_t)>;
 
-template <bool kTiles, template <class> class Kernel, class Real, class Rays>
-auto make_tracer(const Scene& scene, const Rays& rays, const CastContext& context) {
+template <bool kTiles, class Rays>
+auto make_projected(const Scene& scene, const Rays& rays) {
     if constexpr (kTiles)
-        return TileTracer<Kernel, Real>(scene, rays, context);
+        return ProjectedPoints(scene, rays);
+    else
+        return 0;
+}
+
+template <bool kTiles, template <class> class Kernel, class Real, class Rays, class Projected>
+auto make_tracer(const Scene& scene, const Rays& rays, const Projected& projected, const CastContext& context) {
+    if constexpr (kTiles)
+        return TileTracer<Kernel, Real>(scene, rays, projected, context);
     else
         return 0;
 }
@@ -76,8 +84,17 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
     };
     // Camera rays through the BVH go a tile at a time (traverse_tile.hpp).
     constexpr bool kTiles = std::is_same_v<Rays, CameraRays> && !kBruteForce;
-    auto work = [&] {
-        std::conditional_t<kTiles, TileTracer<Kernel, Real>, int> tracer = make_tracer<kTiles, Kernel, Real>(scene, rays, context);
+    const unsigned n_workers = std::max(1u, std::min<unsigned>(threads, unsigned(std::max<std::size_t>(n_tiles, 1))));
+    std::conditional_t<kTiles, ProjectedPoints, int> projected = make_projected<kTiles>(scene, rays);
+    std::atomic<unsigned> projecting{n_workers};
+    auto work = [&](unsigned w) {
+        if constexpr (kTiles) {  // every worker projects its share of the points, then all trace
+            projected.project(w, n_workers);
+            projecting.fetch_sub(1);
+            while (projecting.load() != 0) std::this_thread::yield();
+        }
+        std::conditional_t<kTiles, TileTracer<Kernel, Real>, int> tracer =
+            make_tracer<kTiles, Kernel, Real>(scene, rays, projected, context);
         for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
             if constexpr (kTiles)
                 tracer.trace(tile, store);
@@ -89,9 +106,8 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
             }
         }
     };
-    const unsigned n_workers = std::max(1u, std::min<unsigned>(threads, unsigned(std::max<std::size_t>(n_tiles, 1))));
     std::vector<std::thread> workers;
-    for (unsigned w = 0; w < n_workers; ++w) workers.emplace_back(work);
+    for (unsigned w = 0; w < n_workers; ++w) workers.emplace_back(work, w);
     {
         std::unique_lock<std::mutex> lock(mutex);
         while (done.load() < n_tiles && !abort.load()) {

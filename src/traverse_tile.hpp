@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -25,6 +26,45 @@ namespace vrc {
 /// the tile's four side planes evaluated at once.
 using Double4 = double __attribute__((vector_size(32)));
 using Mask4 = int64_t __attribute__((vector_size(32)));
+
+/// Every scene point's pixel column, row and depth for one camera, computed once per cast
+/// (shared among the workers) and shared by the tiles: a point serves about six triangles, each
+/// visited by several packets. Single precision (the tracer widens its rectangles by the
+/// rounding). A point with no usable projection (near or behind
+/// a pinhole's eye plane) has a NaN column and row.
+class ProjectedPoints {
+   public:
+    ProjectedPoints(const Scene& scene, const CameraRays& rays)
+        : scene_(scene), rays_(rays), map_(rays.pixel_map()), data_(new float[scene.points.size()]) {}
+
+    /// Projects worker `w`'s share of the points (of `workers`).
+    void project(unsigned w, unsigned workers) {
+        const std::size_t n = scene_.points.size() / 3, begin = n * w / workers, end = n * (w + 1) / workers;
+        const CameraSpec& c = rays_.spec();
+        for (std::size_t i = begin; i < end; ++i) {
+            const double* p = scene_.point(uint32_t(i));
+            const double q[3] = {p[0] - c.eye[0], p[1] - c.eye[1], p[2] - c.eye[2]};
+            const double depth = dot(map_.depth, q);
+            const double den = c.parallel ? 1.0 : depth;
+            float* out = data_.get() + 3 * i;
+            out[2] = float(depth);  // within 2^-24 relative: widened where used
+            if (!c.parallel && !(den > CameraRays::PixelMap::kMinDen * (std::fabs(q[0]) + std::fabs(q[1]) + std::fabs(q[2])))) {
+                out[0] = out[1] = std::numeric_limits<float>::quiet_NaN();
+                continue;
+            }
+            out[0] = float((dot(map_.col, q) + map_.col0) / den);
+            out[1] = float((dot(map_.row, q) + map_.row0) / den);
+        }
+    }
+    /// Column, row and depth of point i.
+    [[nodiscard]] const float* operator[](uint32_t i) const { return data_.get() + 3 * std::size_t(i); }
+
+   private:
+    const Scene& scene_;
+    const CameraRays& rays_;
+    CameraRays::PixelMap map_;
+    std::unique_ptr<float[]> data_;
+};
 
 template <template <class> class KernelT, class Real>
 class TileTracer {
@@ -51,8 +91,8 @@ class TileTracer {
     };
 
    public:
-    TileTracer(const Scene& scene, const CameraRays& rays, const CastContext& context)
-        : scene_(scene), rays_(rays), context_(context), map_(rays.pixel_map()) {
+    TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedPoints& projected, const CastContext& context)
+        : scene_(scene), rays_(rays), projected_(projected), context_(context), map_(rays.pixel_map()) {
         const CameraSpec& c = rays.spec();
         const int64_t n = kPacket * kPacket;
         ray_.resize(n);
@@ -74,7 +114,6 @@ class TileTracer {
             rect_margin_ += 16 * kEps * size;
         }
         depth_ = plane(map_.depth, 0);
-        parallel_ = c.parallel;
     }
 
     /// Rays go through the BVH in square packets of kPacket x kPacket pixels: small enough
@@ -213,33 +252,20 @@ class TileTracer {
     /// bound moved.
     bool test(uint32_t i) {
         const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
-        const double* eye = rays_.spec().eye;
-        double lo_c = HUGE_VAL, hi_c = -HUGE_VAL, lo_r = HUGE_VAL, hi_r = -HUGE_VAL, near = HUGE_VAL;
-        bool whole_tile = false;
-        for (int v = 0; v < 3; ++v) {
-            const double* pt = scene_.point(tri[v]);
-            const double q[3] = {pt[0] - eye[0], pt[1] - eye[1], pt[2] - eye[2]};
-            const double depth = dot(map_.depth, q);
-            near = std::min(near, depth);
-            const double den = parallel_ ? 1.0 : depth;
-            // A point near or behind a pinhole's eye plane has no usable projection.
-            if (!parallel_ && !(den > PixelMap::kMinDen * (std::fabs(q[0]) + std::fabs(q[1]) + std::fabs(q[2])))) {
-                whole_tile = true;
-                continue;
-            }
-            const double inv = 1 / den;
-            const double col = (dot(map_.col, q) + map_.col0) * inv, row = (dot(map_.row, q) + map_.row0) * inv;
-            lo_c = std::min(lo_c, col), hi_c = std::max(hi_c, col);
-            lo_r = std::min(lo_r, row), hi_r = std::max(hi_r, row);
-        }
-        if (near > far_) return false;  // wholly behind what every ray already found
+        const float *a = projected_[tri[0]], *b = projected_[tri[1]], *c = projected_[tri[2]];
+        const double near = std::min(a[2], std::min(b[2], c[2]));
+        if (near - 0x1p-23 * std::fabs(near) > far_) return false;  // behind what every ray found
         int64_t c0 = 0, c1 = width_ - 1, q0 = 0, q1 = height_ - 1;
-        if (!whole_tile) {
-            const double m = rect_margin_;
-            c0 = first_at_least(lo_c - m - double(i0_), width_);
-            c1 = last_at_most(hi_c + m - double(i0_), width_);
-            q0 = first_at_least(lo_r - m - double(r0_), height_);
-            q1 = last_at_most(hi_r + m - double(r0_), height_);
+        if (a[0] == a[0] && b[0] == b[0] && c[0] == c[0]) {  // all three project (no NaN)
+            const float lo_c = std::min(a[0], std::min(b[0], c[0])), hi_c = std::max(a[0], std::max(b[0], c[0]));
+            const float lo_r = std::min(a[1], std::min(b[1], c[1])), hi_r = std::max(a[1], std::max(b[1], c[1]));
+            // the projection's own margin, plus the rounding to single precision
+            const double mc = rect_margin_ + 0x1p-23 * double(std::max(std::fabs(lo_c), std::fabs(hi_c)));
+            const double mr = rect_margin_ + 0x1p-23 * double(std::max(std::fabs(lo_r), std::fabs(hi_r)));
+            c0 = first_at_least(double(lo_c) - mc - double(i0_), width_);
+            c1 = last_at_most(double(hi_c) + mc - double(i0_), width_);
+            q0 = first_at_least(double(lo_r) - mr - double(r0_), height_);
+            q1 = last_at_most(double(hi_r) + mr - double(r0_), height_);
         }
         bool changed = false;
         for (int64_t r = q0; r <= q1; ++r)
@@ -273,6 +299,7 @@ class TileTracer {
 
     const Scene& scene_;
     const CameraRays& rays_;
+    const ProjectedPoints& projected_;
     CastContext context_;
     CameraRays::PixelMap map_;
     using PixelMap = CameraRays::PixelMap;
@@ -281,7 +308,6 @@ class TileTracer {
     Double4 side_c_, side_floor_, side_a_[3];  // the side planes, one per lane
     Mask4 side_hi_[3];                         // lanes whose plane takes the box's hi corner on axis k
     double far_ = HUGE_VAL;
-    bool parallel_ = false;
     int64_t i0_ = 0, r0_ = 0, width_ = 0, height_ = 0;
     std::vector<Ray> ray_;
     std::vector<std::optional<Kernel>> kernel_;
