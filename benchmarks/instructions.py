@@ -5,8 +5,8 @@ exactly on a shared, noisy machine, so it measures small changes to the core.
     python benchmarks/instructions.py [--pixels 512] [--arrays TriangleId]
 
 The frog contour (1.5 M triangles) is written once to a temporary file; a child process
-under callgrind loads it, builds the scene (not counted) and casts once from the iso camera
-of benchmarks/peers.py on one thread, counting only the cast's worker (functions whose name
+under callgrind loads it, builds the scene (not counted; ``--scene flat`` builds no BVH, as
+``vrc.cast`` does) and casts once from the iso camera of benchmarks/peers.py on one thread, counting only the cast's worker (functions whose name
 contains ``render``; the core keeps its symbols for this). Prints instructions per ray.
 """
 
@@ -26,16 +26,16 @@ import vtkraycast as vrc
 mesh = pv.read(sys.argv[1])
 n = int(sys.argv[2])
 camera = vrc.Camera.framing(mesh.bounds, view="iso", nx=n, ny=n)
-scene = vrc.Scene(mesh, threads=1)
+scene = vrc.Scene(mesh, threads=1, bvh=sys.argv[4] == "bvh")
 scene.cast(camera, arrays=sys.argv[3].split(","), threads=1)
 """
 
 
-def count(mesh_file: Path, pixels: int, arrays: str, workdir: Path) -> int:
+def count(mesh_file: Path, pixels: int, arrays: str, scene: str, workdir: Path) -> int:
     out = workdir / "callgrind.out"
     run = subprocess.run(
         ["valgrind", "--tool=callgrind", "--collect-atstart=no", "--toggle-collect=std::thread::_State_impl*vrc::render*",
-         f"--callgrind-out-file={out}", sys.executable, "-c", CHILD, str(mesh_file), str(pixels), arrays],
+         f"--callgrind-out-file={out}", sys.executable, "-c", CHILD, str(mesh_file), str(pixels), arrays, scene],
         capture_output=True, text=True, cwd=workdir,  # not the checkout: the installed package
     )
     if run.returncode != 0:
@@ -48,6 +48,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pixels", type=int, default=512)
     parser.add_argument("--arrays", default="TriangleId", help="comma-separated output arrays")
+    parser.add_argument("--scene", choices=["bvh", "flat"], default="bvh",
+                        help="cast through the BVH (Scene) or bin to tiles without one (vrc.cast)")
     args = parser.parse_args()
     from pyvista import examples
 
@@ -55,9 +57,9 @@ def main() -> None:
         workdir = Path(tmp)
         mesh_file = workdir / "frog.vtp"
         examples.load_frog_tissues().contour_labels().save(mesh_file)
-        instructions = count(mesh_file, args.pixels, args.arrays, workdir)
+        instructions = count(mesh_file, args.pixels, args.arrays, args.scene, workdir)
     rays = args.pixels**2
-    print(f"frog contour, {args.pixels}x{args.pixels}, {args.arrays}: {instructions} instructions, "
+    print(f"frog contour, {args.scene} scene, {args.pixels}x{args.pixels}, {args.arrays}: {instructions} instructions, "
           f"{instructions / rays:.0f} per ray")
 
 

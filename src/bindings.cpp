@@ -166,6 +166,8 @@ void bind_precision(nb::module_& m) {
            std::optional<TriplesOut<Real>> barycentric, int threads, std::optional<nb::callable> progress) {
             if (origins.shape(0) != directions.shape(0))
                 throw std::invalid_argument("origins and directions must have the same number of rows");
+            if (!scene.has_bvh() && accel != "none")
+                throw std::invalid_argument("a scene built without a BVH casts camera rays only");
             return run<Real>(scene, vrc::ArrayRays(origins.data(), directions.data(), origins.shape(0), tmin, tmax),
                              strategy, accel, backface_culling, triangle_id, t, barycentric, threads,
                              std::move(progress));
@@ -183,17 +185,20 @@ NB_MODULE(_core, m) {
     nb::class_<vrc::Scene>(m, "Scene")
         .def(
             "__init__",
-            [](vrc::Scene* self, Points points, Triangles triangles, int threads) {
+            [](vrc::Scene* self, Points points, Triangles triangles, int threads, bool bvh) {
                 const std::size_t n_points = points.shape(0), n_tri = triangles.shape(0);
                 const uint32_t* tri = triangles.data();
                 for (std::size_t i = 0; i < 3 * n_tri; ++i)
                     if (tri[i] >= n_points) throw std::invalid_argument("triangle point index out of range");
                 const unsigned n_threads = resolve_threads(threads);
                 nb::gil_scoped_release release;
-                new (self) vrc::Scene(vrc::build_scene(points.data(), n_points, tri, n_tri, n_threads));
+                new (self) vrc::Scene(bvh ? vrc::build_scene(points.data(), n_points, tri, n_tri, n_threads)
+                                          : vrc::flat_scene(points.data(), n_points, tri, n_tri));
             },
-            "points"_a, "triangles"_a, "threads"_a,
-            "Copies the (n, 3) float64 points and (m, 3) uint32 triangles and builds the BVH.")
+            "points"_a, "triangles"_a, "threads"_a, "bvh"_a = true,
+            "Copies the (n, 3) float64 points and (m, 3) uint32 triangles and builds the BVH (with bvh=False none: "
+            "enough for one camera cast).")
+        .def_prop_ro("has_bvh", &vrc::Scene::has_bvh)
         .def_prop_ro("n_triangles", &vrc::Scene::n_triangles)
         .def_prop_ro("n_nodes", [](const vrc::Scene& s) { return s.nodes.size(); })
         .def_prop_ro("memory_bytes", &vrc::Scene::memory_bytes,

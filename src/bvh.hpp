@@ -36,6 +36,8 @@ struct Scene {
     double sphere_radius = -1;            ///< ...and largest point distance to it (-1: empty)
 
     [[nodiscard]] std::size_t n_triangles() const { return prim_ids.size(); }
+    /// False for a flat scene (triangles but no hierarchy: one camera cast's worth).
+    [[nodiscard]] bool has_bvh() const { return !nodes.empty() || prim_ids.empty(); }
     [[nodiscard]] const double* point(uint32_t i) const { return points.data() + 3 * std::size_t(i); }
     /// Bytes held by the structure and the per-triangle data (points included).
     [[nodiscard]] std::size_t memory_bytes() const {
@@ -50,5 +52,10 @@ struct Scene {
 /// indices already checked to be < n_points.
 [[nodiscard]] Scene build_scene(const double* points, std::size_t n_points, const uint32_t* triangles,
                                 std::size_t n_triangles, unsigned threads);
+
+/// The same scene without a hierarchy (triangles in input order): all a single camera cast
+/// needs, as its triangles are binned to the image's tiles instead (bin_triangles.hpp).
+[[nodiscard]] Scene flat_scene(const double* points, std::size_t n_points, const uint32_t* triangles,
+                               std::size_t n_triangles);
 
 }  // namespace vrc

@@ -10,12 +10,14 @@
 #include <functional>
 #include <limits>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
 #include <type_traits>
 
 #include "traverse.hpp"
+#include "bin_triangles.hpp"
 #include "traverse_tile.hpp"
 
 namespace vrc {
@@ -33,21 +35,47 @@ struct Outputs {
 /// returning false aborts the cast between tiles.
 using Poll = std::function<bool(std::size_t, std::size_t)>;
 
-template <bool kTiles, class Rays>
-auto make_projected(const Scene& scene, const Rays& rays) {
-    if constexpr (kTiles)
-        return ProjectedPoints(scene, rays);
-    else
-        return 0;
-}
+/// Every worker waits here until all have arrived (spinning with yields: it separates
+/// phases of a cast that each take milliseconds).
+class Barrier {
+   public:
+    explicit Barrier(unsigned n) : n_(n) {}
+    void wait() {
+        const unsigned generation = generation_.load();
+        if (arrived_.fetch_add(1) + 1 == n_) {
+            arrived_.store(0);
+            generation_.fetch_add(1);
+        } else {
+            while (generation_.load() == generation) std::this_thread::yield();
+        }
+    }
 
-template <bool kTiles, template <class> class Kernel, class Real, class Rays, class Projected>
-auto make_tracer(const Scene& scene, const Rays& rays, const Projected& projected, const CastContext& context) {
-    if constexpr (kTiles)
-        return TileTracer<Kernel, Real>(scene, rays, projected, context);
-    else
-        return 0;
-}
+   private:
+    unsigned n_;
+    std::atomic<unsigned> arrived_{0}, generation_{0};
+};
+
+/// What camera rays share across tiles: the projected points, and on a flat scene (no BVH)
+/// the triangles binned to tiles. Prepared by all workers together (`prepare`).
+struct CameraCast {
+    CameraCast(const Scene& scene, const CameraRays& rays, unsigned workers) : projected(scene, rays), barrier(workers) {
+        if (!scene.has_bvh()) bins.emplace(scene, rays, projected, workers);
+    }
+    /// Worker w's share of the preparation; returns the triangles every tile tests.
+    std::vector<uint32_t> prepare(unsigned w, unsigned workers) {
+        projected.project(w, workers);
+        barrier.wait();
+        if (!bins) return {};
+        bins->count(w);
+        barrier.wait();
+        bins->place(w);
+        barrier.wait();
+        return bins->unknown();
+    }
+    ProjectedPoints projected;
+    std::optional<TriangleBins> bins;
+    Barrier barrier;
+};
 
 /// Casts every ray of `rays`, tiles shared among `threads` workers, through the BVH (or,
 /// with kBruteForce, the seed's sphere-box-every-triangle method), optionally skipping
@@ -70,6 +98,12 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         if (out.barycentric)
             for (int c = 0; c < 3; ++c) out.barycentric[3 * k + c] = found ? hit.b[c] : kNaN;
     };
+    auto tile_done = [&] {
+        if (done.fetch_add(1) + 1 == n_tiles) {
+            std::lock_guard<std::mutex> lock(mutex);
+            finished.notify_all();
+        }
+    };
     auto trace_rays = [&](std::size_t tile) {
         // The seed's bounding test, a whole tile at a time: tiles that cannot see the
         // scene are misses without a single ray traversal.
@@ -82,27 +116,27 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
                               : closest_hit<Kernel, Real>(scene, ray, context));
         });
     };
-    // Camera rays through the BVH go a tile at a time (traverse_tile.hpp).
-    constexpr bool kTiles = std::is_same_v<Rays, CameraRays> && !kBruteForce;
+    // Camera rays go a tile at a time (traverse_tile.hpp), through the BVH or, on a flat
+    // scene, through the triangles binned to the tile (bin_triangles.hpp).
     const unsigned n_workers = std::max(1u, std::min<unsigned>(threads, unsigned(std::max<std::size_t>(n_tiles, 1))));
-    std::conditional_t<kTiles, ProjectedPoints, int> projected = make_projected<kTiles>(scene, rays);
-    std::atomic<unsigned> projecting{n_workers};
+    constexpr bool kTiles = std::is_same_v<Rays, CameraRays> && !kBruteForce;
+    std::optional<std::conditional_t<kTiles, CameraCast, int>> camera;
+    if constexpr (kTiles) camera.emplace(scene, rays, n_workers);
     auto work = [&](unsigned w) {
-        if constexpr (kTiles) {  // every worker projects its share of the points, then all trace
-            projected.project(w, n_workers);
-            projecting.fetch_sub(1);
-            while (projecting.load() != 0) std::this_thread::yield();
-        }
-        std::conditional_t<kTiles, TileTracer<Kernel, Real>, int> tracer =
-            make_tracer<kTiles, Kernel, Real>(scene, rays, projected, context);
-        for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
-            if constexpr (kTiles)
-                tracer.trace(tile, store);
-            else
+        if constexpr (kTiles) {
+            const std::vector<uint32_t> unknown = camera->prepare(w, n_workers);
+            TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context);
+            for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
+                if (camera->bins)
+                    tracer.trace_bin(tile, camera->bins->begin(tile), camera->bins->end(tile), unknown, store);
+                else
+                    tracer.trace(tile, store);
+                tile_done();
+            }
+        } else {
+            for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
                 trace_rays(tile);
-            if (done.fetch_add(1) + 1 == n_tiles) {
-                std::lock_guard<std::mutex> lock(mutex);
-                finished.notify_all();
+                tile_done();
             }
         }
     };

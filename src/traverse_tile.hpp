@@ -13,11 +13,12 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
-#include <memory>
 #include <optional>
 #include <vector>
 
 #include "camera_rays.hpp"
+#include "bin_triangles.hpp"
+#include "projected_points.hpp"
 #include "traverse.hpp"
 
 namespace vrc {
@@ -26,45 +27,6 @@ namespace vrc {
 /// the tile's four side planes evaluated at once.
 using Double4 = double __attribute__((vector_size(32)));
 using Mask4 = int64_t __attribute__((vector_size(32)));
-
-/// Every scene point's pixel column, row and depth for one camera, computed once per cast
-/// (shared among the workers) and shared by the tiles: a point serves about six triangles, each
-/// visited by several packets. Single precision (the tracer widens its rectangles by the
-/// rounding). A point with no usable projection (near or behind
-/// a pinhole's eye plane) has a NaN column and row.
-class ProjectedPoints {
-   public:
-    ProjectedPoints(const Scene& scene, const CameraRays& rays)
-        : scene_(scene), rays_(rays), map_(rays.pixel_map()), data_(new float[scene.points.size()]) {}
-
-    /// Projects worker `w`'s share of the points (of `workers`).
-    void project(unsigned w, unsigned workers) {
-        const std::size_t n = scene_.points.size() / 3, begin = n * w / workers, end = n * (w + 1) / workers;
-        const CameraSpec& c = rays_.spec();
-        for (std::size_t i = begin; i < end; ++i) {
-            const double* p = scene_.point(uint32_t(i));
-            const double q[3] = {p[0] - c.eye[0], p[1] - c.eye[1], p[2] - c.eye[2]};
-            const double depth = dot(map_.depth, q);
-            const double den = c.parallel ? 1.0 : depth;
-            float* out = data_.get() + 3 * i;
-            out[2] = float(depth);  // within 2^-24 relative: widened where used
-            if (!c.parallel && !(den > CameraRays::PixelMap::kMinDen * (std::fabs(q[0]) + std::fabs(q[1]) + std::fabs(q[2])))) {
-                out[0] = out[1] = std::numeric_limits<float>::quiet_NaN();
-                continue;
-            }
-            out[0] = float((dot(map_.col, q) + map_.col0) / den);
-            out[1] = float((dot(map_.row, q) + map_.row0) / den);
-        }
-    }
-    /// Column, row and depth of point i.
-    [[nodiscard]] const float* operator[](uint32_t i) const { return data_.get() + 3 * std::size_t(i); }
-
-   private:
-    const Scene& scene_;
-    const CameraRays& rays_;
-    CameraRays::PixelMap map_;
-    std::unique_ptr<float[]> data_;
-};
 
 template <template <class> class KernelT, class Real>
 class TileTracer {
@@ -93,26 +55,12 @@ class TileTracer {
    public:
     TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedPoints& projected, const CastContext& context)
         : scene_(scene), rays_(rays), projected_(projected), context_(context), map_(rays.pixel_map()) {
-        const CameraSpec& c = rays.spec();
-        const int64_t n = kPacket * kPacket;
+        const int64_t n = CameraRays::kTile * CameraRays::kTile;
         ray_.resize(n);
         kernel_.resize(n);
         hit_.resize(n);
         bound_.resize(n);
         scale_.resize(n);
-        for (int k = 0; k < 3; ++k) {
-            to_anchor_[k] = scene.anchor[k] - c.eye[k];
-            // farthest reach of a stored box from the anchor on this axis
-            reach_[k] = std::max(std::fabs(double(scene.bounds.lo[k])), std::fabs(double(scene.bounds.hi[k])));
-            if (!(reach_[k] < HUGE_VAL)) reach_[k] = 0;  // empty scene
-        }
-        rect_margin_ = map_.margin;
-        if (c.parallel) {  // a parallel projection's rounding grows with |P - eye|
-            double size = std::fabs(map_.col0) + std::fabs(map_.row0);
-            for (int k = 0; k < 3; ++k)
-                size += std::max(std::fabs(map_.col[k]), std::fabs(map_.row[k])) * (std::fabs(to_anchor_[k]) + reach_[k]);
-            rect_margin_ += 16 * kEps * size;
-        }
         depth_ = plane(map_.depth, 0);
     }
 
@@ -131,24 +79,53 @@ class TileTracer {
                 trace({i, std::min(i + kPacket - 1, t.i1), r, std::min(r + kPacket - 1, t.r1)}, may_hit, store);
     }
 
+    /// A flat scene's tile (no BVH): its binned triangles (`begin` to `end`, see
+    /// bin_triangles.hpp), then those with no usable projection (`unknown`), which are
+    /// tested on the whole tile unless the tile's frustum separates them.
+    template <class Store>
+    void trace_bin(std::size_t tile, const TriangleBins::Entry* begin, const TriangleBins::Entry* end,
+                   const std::vector<uint32_t>& unknown, Store&& store) {
+        const CameraRays::TilePixels p = rays_.tile_pixels(tile);
+        start(p);
+        if (rays_.tile_may_hit(tile)) {
+            for (const TriangleBins::Entry* e = begin; e != end; ++e)
+                test_pixels(e->triangle, {e->c0, e->c1, e->r0, e->r1, e->near});
+            if (!unknown.empty()) set_sides(p);
+            for (uint32_t i : unknown)
+                if (!separated(i)) test_pixels(i, {0, width_ - 1, 0, height_ - 1});
+        }
+        finish(store);
+    }
+
    private:
     template <class Store>
     void trace(const CameraRays::TilePixels& p, bool may_hit, Store& store) {
+        start(p);
+        if (may_hit) traverse(p);
+        finish(store);
+    }
+
+    /// Empties the rays of the block p; they are made when first tested (most blocks of a
+    /// sparse frame see no triangle).
+    void start(const CameraRays::TilePixels& p) {
         i0_ = p.i0;
         r0_ = p.r0;
         width_ = p.i1 - p.i0 + 1;
         height_ = p.r1 - p.r0 + 1;
-        const int64_t n = width_ * height_, nx = int64_t(rays_.spec().nx);
-        // Rays are made when first tested: most packets of a sparse frame see no triangle.
-        for (int64_t j = 0; j < n; ++j) {
+        for (int64_t j = 0, n = width_ * height_; j < n; ++j) {
             kernel_[j].reset();
             hit_[j] = Hit<Real>{};
             bound_[j] = rays_.spec().far;  // a depth until the ray exists, then its t
             scale_[j] = 1;
         }
-        if (may_hit) traverse(p);
-        for (int64_t j = 0; j < n; ++j)
-            store(std::size_t((i0_ + j % width_) + (r0_ + j / width_) * nx), ray_[j], hit_[j]);  // ray_ used on hits only
+        far_ = HUGE_VAL;
+    }
+
+    template <class Store>
+    void finish(Store& store) {
+        const int64_t nx = int64_t(rays_.spec().nx);
+        for (int64_t j = 0, n = width_ * height_; j < n; ++j)  // ray_ is read on hits only
+            store(std::size_t((i0_ + j % width_) + (r0_ + j / width_) * nx), ray_[j], hit_[j]);
     }
 
     /// Half-space a.q + b >= 0 of q = P - eye, with its rounding slack over the scene.
@@ -158,8 +135,8 @@ class TileTracer {
         h.c = b;
         for (int k = 0; k < 3; ++k) {
             h.a[k] = a[k];
-            h.c += a[k] * to_anchor_[k];
-            size += std::fabs(a[k]) * (std::fabs(to_anchor_[k]) + reach_[k]);
+            h.c += a[k] * projected_.to_anchor()[k];
+            size += std::fabs(a[k]) * (std::fabs(projected_.to_anchor()[k]) + projected_.reach()[k]);
         }
         h.slack = 16 * kEps * size;
         return h;
@@ -195,10 +172,11 @@ class TileTracer {
     void update_far() {
         double far = 0;
         for (int64_t j = 0, n = width_ * height_; j < n; ++j) far = std::max(far, bound_[j] * scale_[j]);
-        far_ = far * (1 + 1e-12) + depth_.slack;
+        far_ = far * (1 + 1e-12) + depth_.slack + projected_.depth_slack();
     }
 
-    void traverse(const CameraRays::TilePixels& p) {
+    /// The block's four side planes, one per lane.
+    void set_sides(const CameraRays::TilePixels& p) {
         const double m = map_.margin;
         const Plane side[4] = {at_least(map_.col, map_.col0, double(p.i0) - m), at_most(map_.col, map_.col0, double(p.i1) + m),
                                at_least(map_.row, map_.row0, double(p.r0) - m), at_most(map_.row, map_.row0, double(p.r1) + m)};
@@ -210,6 +188,24 @@ class TileTracer {
                 side_hi_[k][h] = side[h].a[k] >= 0 ? -1 : 0;
             }
         }
+    }
+
+    /// Whether one side plane has all three points of triangle i outside.
+    [[nodiscard]] bool separated(uint32_t i) const {
+        Mask4 all_out = Mask4{} - 1;
+        const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
+        for (int v = 0; v < 3; ++v) {
+            const double* p = scene_.point(tri[v]);
+            Double4 value = side_c_;
+            for (int k = 0; k < 3; ++k)  // relative to the anchor, as the planes' constants are
+                value += side_a_[k] * (p[k] - scene_.anchor[k]);
+            all_out &= value < side_floor_;
+        }
+        return all_out[0] | all_out[1] | all_out[2] | all_out[3];
+    }
+
+    void traverse(const CameraRays::TilePixels& p) {
+        set_sides(p);
         update_far();
         struct Pending {
             uint32_t node;
@@ -251,26 +247,19 @@ class TileTracer {
     /// Tests triangle i on the tile's pixels its projection can cover; true when a ray's
     /// bound moved.
     bool test(uint32_t i) {
-        const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
-        const float *a = projected_[tri[0]], *b = projected_[tri[1]], *c = projected_[tri[2]];
-        const double near = std::min(a[2], std::min(b[2], c[2]));
-        if (near - 0x1p-23 * std::fabs(near) > far_) return false;  // behind what every ray found
-        int64_t c0 = 0, c1 = width_ - 1, q0 = 0, q1 = height_ - 1;
-        if (a[0] == a[0] && b[0] == b[0] && c[0] == c[0]) {  // all three project (no NaN)
-            const float lo_c = std::min(a[0], std::min(b[0], c[0])), hi_c = std::max(a[0], std::max(b[0], c[0]));
-            const float lo_r = std::min(a[1], std::min(b[1], c[1])), hi_r = std::max(a[1], std::max(b[1], c[1]));
-            // the projection's own margin, plus the rounding to single precision
-            const double mc = rect_margin_ + 0x1p-23 * double(std::max(std::fabs(lo_c), std::fabs(hi_c)));
-            const double mr = rect_margin_ + 0x1p-23 * double(std::max(std::fabs(lo_r), std::fabs(hi_r)));
-            c0 = first_at_least(double(lo_c) - mc - double(i0_), width_);
-            c1 = last_at_most(double(hi_c) + mc - double(i0_), width_);
-            q0 = first_at_least(double(lo_r) - mr - double(r0_), height_);
-            q1 = last_at_most(double(hi_r) + mr - double(r0_), height_);
-        }
+        PixelRect rect{0, width_ - 1, 0, height_ - 1};
+        const auto reach = projected_.rect(scene_.triangles.data() + 3 * std::size_t(i), i0_, r0_, width_, height_,
+                                           rays_.spec().near, far_, rect);
+        return reach != ProjectedPoints::Reach::none && test_pixels(i, rect);
+    }
+
+    /// Tests triangle i on the block's pixels in `rect`; true when a ray's bound moved.
+    bool test_pixels(uint32_t i, const PixelRect& rect) {
         bool changed = false;
-        for (int64_t r = q0; r <= q1; ++r)
-            for (int64_t c = c0; c <= c1; ++c) {
+        for (int64_t r = rect.r0; r <= rect.r1; ++r)
+            for (int64_t c = rect.c0; c <= rect.c1; ++c) {
                 const int64_t j = c + r * width_;
+                if (rect.near - projected_.depth_slack() > bound_[j] * scale_[j] * (1 + 1e-12)) continue;  // beyond this ray's hit
                 if (!kernel_[j]) make_ray(j);
                 const double before = bound_[j];
                 test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
@@ -286,24 +275,11 @@ class TileTracer {
         scale_[j] = dot(map_.depth, ray_[j].dir);  // depth per unit of t
     }
 
-    /// First integer >= x within [0, n) (0 when x is below or NaN, n when above).
-    static int64_t first_at_least(double x, int64_t n) {
-        if (!(x > 0)) return 0;
-        return x >= double(n) ? n : int64_t(std::ceil(x));
-    }
-    /// Last integer <= x within [0, n) (-1 when x is below, n - 1 when above or NaN).
-    static int64_t last_at_most(double x, int64_t n) {
-        if (x < 0) return -1;
-        return !(x < double(n - 1)) ? n - 1 : int64_t(std::floor(x));
-    }
-
     const Scene& scene_;
     const CameraRays& rays_;
     const ProjectedPoints& projected_;
     CastContext context_;
     CameraRays::PixelMap map_;
-    using PixelMap = CameraRays::PixelMap;
-    double to_anchor_[3], reach_[3], rect_margin_;
     Plane depth_;
     Double4 side_c_, side_floor_, side_a_[3];  // the side planes, one per lane
     Mask4 side_hi_[3];                         // lanes whose plane takes the box's hi corner on axis k

@@ -1,8 +1,10 @@
 """Camera casts go through the BVH a packet of pixels at a time, culling nodes against the
 packet's frustum and depth and testing each triangle only on the pixels its projection can
-cover (src/traverse_tile.hpp). ``Scene.intersect`` on the same rays traverses ray by ray.
-Both call the same ray-triangle test, so every pixel must agree exactly: any pixel the
-packet path wrongly culled would show here as a miss or a farther triangle."""
+cover (src/traverse_tile.hpp); without a BVH (``bvh=False``, the one-shot ``vrc.cast``)
+the triangles are binned to the tiles their projection touches (src/bin_triangles.hpp).
+``Scene.intersect`` on the same rays traverses the BVH ray by ray. All call the same
+ray-triangle test, so every pixel must agree exactly: any pixel a tile path wrongly culled
+would show here as a miss or a farther triangle."""
 
 from __future__ import annotations
 
@@ -15,10 +17,17 @@ from vtkraycast.testing import bumpy_sphere, camera_rays, integer_grid, star_mes
 
 
 def assert_same_as_ray_by_ray(scene: vrc.Scene, cam: vrc.Camera, **options) -> int:
+    """Checks the BVH scene's packets and a flat scene's bins against ray-by-ray casts."""
+    hits = compare(scene, scene, cam, **options)
+    assert compare(vrc.Scene(scene.prepared.surface, bvh=False), scene, cam, **options) == hits
+    return hits
+
+
+def compare(scene: vrc.Scene, reference: vrc.Scene, cam: vrc.Camera, **options) -> int:
     image = scene.cast(cam, arrays=["TriangleId", "Depth", "Barycentric"], **options)
     origins, directions = camera_rays(cam)
     scale = 1.0 if cam.parallel else cam.d
-    ref = scene.intersect(
+    ref = reference.intersect(
         origins,
         directions,
         tmin=cam.near / scale,
@@ -97,3 +106,19 @@ def test_one_triangle_in_a_large_frame():
     mesh = bumpy_sphere(0, scale=1e-3)
     cam = vrc.Camera((0, 0, 5), (0, 0, 0), (0, 1, 0), view_angle=30, nx=301, ny=203)
     assert 0 < assert_same_as_ray_by_ray(vrc.Scene(mesh), cam) < 100
+
+
+def test_flat_scene_is_the_one_shot_cast():
+    mesh = bumpy_sphere(3)
+    cam = around(mesh)
+    flat = vrc.Scene(mesh, bvh=False)
+    assert not flat.has_bvh and vrc.Scene(mesh).has_bvh
+    assert flat.memory_bytes < vrc.Scene(mesh).memory_bytes
+    one_shot = vrc.cast(mesh, cam, arrays=["TriangleId"])
+    np.testing.assert_array_equal(one_shot["TriangleId"], flat.cast(cam, arrays=["TriangleId"])["TriangleId"])
+    with pytest.raises(ValueError, match="bvh=False"):
+        flat.intersect([[0, 0, 5]], [[0, 0, -1]])
+    hits = flat.intersect([[0, 0, 5]], [[0, 0, -1]], accel="none")
+    assert hits["triangle_id"][0] >= 0
+    with pytest.raises(TypeError, match="bvh"):
+        vrc.Scene(mesh, bvh="no")

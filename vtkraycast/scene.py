@@ -79,6 +79,11 @@ class Scene:
         mesh is copied: later changes to it do not affect the scene.
     threads : int, optional
         Threads for the build; all cores by default.
+    bvh : bool, default: True
+        Build the bounding volume hierarchy, which every later cast reuses. ``False`` builds
+        none: a camera cast then bins the triangles to the image's tiles instead, which is
+        cheaper for a single cast (what :func:`cast` does); :meth:`intersect` then needs
+        ``accel="none"``.
 
     Examples
     --------
@@ -92,9 +97,16 @@ class Scene:
     1.5
     """
 
-    def __init__(self, mesh: Any, *, threads: int | None = None) -> None:
+    def __init__(self, mesh: Any, *, threads: int | None = None, bvh: bool = True) -> None:
+        if not isinstance(bvh, (bool, np.bool_)):
+            raise TypeError(f"bvh must be True or False, got {bvh!r}")
         self._mesh = prepare_mesh(mesh)
-        self._core = _core.Scene(self._mesh.points, self._mesh.triangles, _threads(threads))
+        self._core = _core.Scene(self._mesh.points, self._mesh.triangles, _threads(threads), bool(bvh))
+
+    @property
+    def has_bvh(self) -> bool:
+        """Whether the scene holds a BVH (see ``bvh``)."""
+        return bool(self._core.has_bvh)
 
     @property
     def n_triangles(self) -> int:
@@ -103,7 +115,7 @@ class Scene:
 
     @property
     def memory_bytes(self) -> int:
-        """Bytes held by the BVH, the triangles and the points in the native core."""
+        """Bytes held by the BVH (if any), the triangles and the points in the native core."""
         return int(self._core.memory_bytes)
 
     @property
@@ -241,6 +253,8 @@ class Scene:
         ``t`` (in units of the direction's length, NaN on a miss) and ``barycentric``
         (``(n, 3)`` weights of the triangle's points, NaN on a miss).
         """
+        if not self.has_bvh and _accel(accel) != "none":
+            raise ValueError('this scene was built with bvh=False: intersect needs accel="none", or build with bvh=True')
         o, d = _rays(origins, "origins"), _rays(directions, "directions")
         if o.shape[0] != d.shape[0]:
             raise ValueError(f"origins and directions differ in length: {o.shape[0]} and {d.shape[0]}")
@@ -299,8 +313,10 @@ def progress_reporter(
 def cast(mesh: Any, camera: Camera | Any, **options: Any) -> Any:
     """Casts ``mesh`` from ``camera`` once: ``Scene(mesh).cast(camera, ...)``.
 
-    Keyword options are those of :meth:`Scene.cast`. Build a :class:`Scene` instead when
-    the same mesh is cast from several cameras: the BVH is then built once.
+    Keyword options are those of :meth:`Scene.cast`. No BVH is built (``Scene(mesh,
+    bvh=False)``): the triangles are binned to the image's tiles, all one cast needs. Build
+    a :class:`Scene` when the same mesh is cast from several cameras: its BVH is then built
+    once and makes each cast cheaper.
 
     Examples
     --------
@@ -314,4 +330,4 @@ def cast(mesh: Any, camera: Camera | Any, **options: Any) -> Any:
     True
     """
     threads = options.get("threads")
-    return Scene(mesh, threads=threads).cast(camera, **options)
+    return Scene(mesh, threads=threads, bvh=False).cast(camera, **options)
