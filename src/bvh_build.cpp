@@ -18,6 +18,11 @@
 #include <thread>
 
 #include <immintrin.h>
+#include <sys/mman.h>
+#include <new>
+#include <chrono>
+#include <cstdio>
+#define VRC_T(name) do { if (std::getenv("VRC_BUILD_TIMING")) { auto now_ = std::chrono::steady_clock::now(); std::fprintf(stderr, "%-10s %7.2f ms\n", name, std::chrono::duration<double, std::milli>(now_ - t_last_).count()); t_last_ = now_; } } while (0)
 
 #include "bvh.hpp"
 
@@ -31,19 +36,24 @@ constexpr uint32_t kMinTopNode = 1u << 15;  // smallest node binned/partitioned 
 constexpr int kMaxSahDepth = 64;  // below this, median splits: depth stays < 96 (traversal stack 128)
 
 /// A triangle's box (relative to the anchor, rounded outward) and its input index; 32 bytes,
-/// two aligned SIMD loads. Its centroid is computed on the fly: 0.5 * (lo + hi).
+/// one aligned 256-bit load. The low corner is stored negated (exact), so that growing a
+/// bin is one max over [-lo, hi]. The centroid is computed on the fly: 0.5 * (lo + hi),
+/// as hi - (-lo), the same rounding.
 struct alignas(32) Ref {
-    float lo[3];
+    float nlo[3];
     uint32_t id;
     float hi[3];
     float pad;
 };
 static_assert(sizeof(Ref) == 32, "refs are meant to be 32 bytes");
 
-inline __m128 load_lo(const Ref& r) {  // lane 3 (the id's bits) zeroed: no denormal operands
-    return _mm_blend_ps(_mm_load_ps(r.lo), _mm_setzero_ps(), 8);
+inline __m256 load(const Ref& r) {  // lane 3 (the id's bits) zeroed: no denormal operands
+    return _mm256_blend_ps(_mm256_load_ps(r.nlo), _mm256_setzero_ps(), 8);
 }
-inline __m128 load_hi(const Ref& r) { return _mm_load_ps(r.hi); }
+inline __m128 low(__m256 v) { return _mm256_castps256_ps128(v); }
+inline __m128 high(__m256 v) { return _mm256_extractf128_ps(v, 1); }
+inline __m128 negate(__m128 v) { return _mm_xor_ps(v, _mm_set1_ps(-0.0f)); }
+inline __m128 centroid(__m256 v) { return _mm_mul_ps(_mm_sub_ps(high(v), low(v)), _mm_set1_ps(0.5f)); }
 inline __m128 centroid(__m128 lo, __m128 hi) { return _mm_mul_ps(_mm_add_ps(lo, hi), _mm_set1_ps(0.5f)); }
 
 /// Box in SIMD registers (lane 3 unused). min/max operand order as in Box::grow.
@@ -67,7 +77,13 @@ struct VBox {
         }
         return b;
     }
-    [[nodiscard]] float half_area() const { return box().half_area(); }
+    /// Box::half_area's arithmetic, in the same order: (dx * dy + dy * dz) + dz * dx.
+    [[nodiscard]] float half_area() const {
+        const __m128 d = _mm_sub_ps(hi, lo);
+        if ((_mm_movemask_ps(_mm_cmpge_ps(d, _mm_setzero_ps())) & 7) != 7) return 0.0f;
+        const __m128 p = _mm_mul_ps(d, _mm_shuffle_ps(d, d, _MM_SHUFFLE(3, 0, 2, 1)));  // dx*dy, dy*dz, dz*dx
+        return (_mm_cvtss_f32(p) + _mm_cvtss_f32(_mm_shuffle_ps(p, p, 1))) + _mm_cvtss_f32(_mm_shuffle_ps(p, p, 2));
+    }
 };
 
 /// A node to build: triangles [begin, end), their box and the box of their centroids.
@@ -102,31 +118,61 @@ struct Binner {
     }
 };
 
+/// Per-axis bins: boxes as [-lo, hi] (grown by one max), counts with the axes as lanes.
+/// Consecutive triangles of a mesh tend to fall in the same bins, so larger nodes alternate
+/// between two sets of bins: the read-modify-write of one bin then does not wait on the
+/// previous triangle's.
 struct Bins {
-    VBox box[3][kBins];
-    uint32_t count[3][kBins] = {};
+    static constexpr uint32_t kTwoSets = 64;
+    __m256 box[3][kBins];
+    alignas(16) int32_t count[kBins][4];
 
-    void add(const Ref* refs, uint32_t begin, uint32_t end, const Binner& binner) {
-        for (uint32_t i = begin; i < end; ++i) {
-            const __m128 lo = load_lo(refs[i]), hi = load_hi(refs[i]);
-            const __m128i b = binner.bin(centroid(lo, hi));
-            const int b0 = _mm_extract_epi32(b, 0), b1 = _mm_extract_epi32(b, 1), b2 = _mm_extract_epi32(b, 2);
-            box[0][b0].grow(lo, hi);
-            box[1][b1].grow(lo, hi);
-            box[2][b2].grow(lo, hi);
-            ++count[0][b0];
-            ++count[1][b1];
-            ++count[2][b2];
+    explicit Bins(int n_bins) {
+        const __m256 empty = _mm256_set1_ps(-std::numeric_limits<float>::infinity());
+        for (int b = 0; b < n_bins; ++b) {
+            for (int k = 0; k < 3; ++k) box[k][b] = empty;
+            _mm_store_si128(reinterpret_cast<__m128i*>(count[b]), _mm_setzero_si128());
         }
     }
+    static void add_one(Bins& bins, const Ref& r, const Binner& binner) {
+        const __m256 v = load(r);
+        const __m128i b = binner.bin(centroid(v));
+        const int b0 = _mm_cvtsi128_si32(b), b1 = _mm_extract_epi32(b, 1), b2 = _mm_extract_epi32(b, 2);
+        bins.box[0][b0] = _mm256_max_ps(v, bins.box[0][b0]);
+        bins.box[1][b1] = _mm256_max_ps(v, bins.box[1][b1]);
+        bins.box[2][b2] = _mm256_max_ps(v, bins.box[2][b2]);
+        ++bins.count[b0][0];
+        ++bins.count[b1][1];
+        ++bins.count[b2][2];
+    }
+    void add(const Ref* refs, uint32_t begin, uint32_t end, const Binner& binner) {
+        if (end - begin < kTwoSets) {
+            for (uint32_t i = begin; i < end; ++i) add_one(*this, refs[i], binner);
+            return;
+        }
+        Bins other(binner.n_bins);
+        uint32_t i = begin;
+        for (; i + 1 < end; i += 2) {
+            add_one(*this, refs[i], binner);
+            add_one(other, refs[i + 1], binner);
+        }
+        if (i < end) add_one(*this, refs[i], binner);
+        merge(other, binner.n_bins);
+    }
     void merge(const Bins& o, int n_bins) {
-        for (int k = 0; k < 3; ++k)
-            for (int b = 0; b < n_bins; ++b) {
-                box[k][b].grow(o.box[k][b]);
-                count[k][b] += o.count[k][b];
-            }
+        for (int b = 0; b < n_bins; ++b) {
+            for (int k = 0; k < 3; ++k) box[k][b] = _mm256_max_ps(o.box[k][b], box[k][b]);
+            for (int k = 0; k < 3; ++k) count[b][k] += o.count[b][k];
+        }
     }
 };
+
+inline VBox to_vbox(__m256 b) {
+    VBox v;
+    v.lo = negate(low(b));
+    v.hi = high(b);
+    return v;
+}
 
 struct Split {
     int axis = -1, bin = 0;
@@ -134,93 +180,115 @@ struct Split {
     VBox left, right;
 };
 
-/// The cheapest binned SAH plane over all three axes; axis -1 when a leaf is cheaper.
+/// Box::half_area of three boxes ([-lo, hi]) at once, one per lane, in the same arithmetic.
+inline __m128 half_areas(__m256 a, __m256 b, __m256 c) {
+    __m128 x = _mm_add_ps(high(a), low(a)), y = _mm_add_ps(high(b), low(b)), z = _mm_add_ps(high(c), low(c));
+    __m128 w = _mm_setzero_ps();
+    _MM_TRANSPOSE4_PS(x, y, z, w);  // now x = (dx of a, b, c), y = dy..., z = dz...
+    const __m128 zero = _mm_setzero_ps();
+    const __m128 ok = _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(x, zero), _mm_cmpge_ps(y, zero)), _mm_cmpge_ps(z, zero));
+    const __m128 area = _mm_add_ps(_mm_add_ps(_mm_mul_ps(x, y), _mm_mul_ps(y, z)), _mm_mul_ps(z, x));
+    return _mm_and_ps(area, ok);
+}
+
+/// The cheapest binned SAH plane over all three axes; axis -1 when a leaf is cheaper. The
+/// three axes are evaluated together (one per lane), then chosen in the scalar order.
 Split best_split(const Bins& bins, const Binner& binner, uint32_t count, const VBox& bounds) {
     const int n_bins = binner.n_bins;
+    alignas(16) float cost[kBins][4];
+    alignas(16) int32_t n_left[kBins][4], n_right[kBins][4];
+    __m128 right_area[kBins];
+    const __m256 empty = _mm256_set1_ps(-std::numeric_limits<float>::infinity());
+    __m256 a0 = empty, a1 = empty, a2 = empty;
+    __m128i n = _mm_setzero_si128();
+    for (int b = n_bins - 1; b > 0; --b) {
+        a0 = _mm256_max_ps(bins.box[0][b], a0);
+        a1 = _mm256_max_ps(bins.box[1][b], a1);
+        a2 = _mm256_max_ps(bins.box[2][b], a2);
+        n = _mm_add_epi32(n, _mm_load_si128(reinterpret_cast<const __m128i*>(bins.count[b])));
+        right_area[b] = half_areas(a0, a1, a2);
+        _mm_store_si128(reinterpret_cast<__m128i*>(n_right[b]), n);
+    }
+    const __m128 inv_area = _mm_set1_ps(1.0f / std::max(bounds.half_area(), 1e-30f));
+    const __m128 traversal = _mm_set1_ps(kTraversalCost);
+    a0 = a1 = a2 = empty;
+    n = _mm_setzero_si128();
+    for (int b = 0; b < n_bins - 1; ++b) {
+        a0 = _mm256_max_ps(bins.box[0][b], a0);
+        a1 = _mm256_max_ps(bins.box[1][b], a1);
+        a2 = _mm256_max_ps(bins.box[2][b], a2);
+        n = _mm_add_epi32(n, _mm_load_si128(reinterpret_cast<const __m128i*>(bins.count[b])));
+        _mm_store_si128(reinterpret_cast<__m128i*>(n_left[b]), n);
+        const __m128 nr = _mm_cvtepi32_ps(_mm_load_si128(reinterpret_cast<const __m128i*>(n_right[b + 1])));
+        const __m128 sum = _mm_add_ps(_mm_mul_ps(half_areas(a0, a1, a2), _mm_cvtepi32_ps(n)), _mm_mul_ps(right_area[b + 1], nr));
+        _mm_store_ps(cost[b], _mm_add_ps(traversal, _mm_mul_ps(sum, inv_area)));
+    }
     Split best;
     float best_cost = static_cast<float>(count);  // cost of a leaf
-    const float inv_area = 1.0f / std::max(bounds.half_area(), 1e-30f);
     for (int k = 0; k < 3; ++k) {
         if (binner.scale_k[k] == 0.0f) continue;
-        float right_area[kBins];
-        uint32_t right_count[kBins];
-        VBox acc;
-        uint32_t n = 0;
-        for (int b = n_bins - 1; b > 0; --b) {
-            acc.grow(bins.box[k][b]);
-            n += bins.count[k][b];
-            right_area[b] = acc.half_area();
-            right_count[b] = n;
-        }
-        acc = VBox{};
-        n = 0;
-        for (int b = 0; b < n_bins - 1; ++b) {
-            acc.grow(bins.box[k][b]);
-            n += bins.count[k][b];
-            const float cost = kTraversalCost + (acc.half_area() * n + right_area[b + 1] * right_count[b + 1]) * inv_area;
-            if (n > 0 && right_count[b + 1] > 0 && cost < best_cost) {
-                best_cost = cost;
+        for (int b = 0; b < n_bins - 1; ++b)
+            if (n_left[b][k] > 0 && n_right[b + 1][k] > 0 && cost[b][k] < best_cost) {
+                best_cost = cost[b][k];
                 best.axis = k;
                 best.bin = b;
             }
-        }
     }
     if (best.axis >= 0) {
+        __m256 l = empty, r = empty;
         for (int b = 0; b < n_bins; ++b) {
-            if (b <= best.bin) {
-                best.left.grow(bins.box[best.axis][b]);
-                best.n_left += bins.count[best.axis][b];
-            } else {
-                best.right.grow(bins.box[best.axis][b]);
-            }
+            if (b <= best.bin)
+                l = _mm256_max_ps(bins.box[best.axis][b], l);
+            else
+                r = _mm256_max_ps(bins.box[best.axis][b], r);
         }
+        best.left = to_vbox(l);
+        best.right = to_vbox(r);
+        best.n_left = static_cast<uint32_t>(n_left[best.bin][best.axis]);
     }
     return best;
 }
 
 /// Partitions refs[begin, end) into those whose centroid bin on `axis` is <= `bin` and the
-/// rest (the same swaps as libstdc++'s std::partition), and the boxes of both sides'
-/// centroids. Every element is classified exactly once.
+/// rest, and accumulates the boxes of both sides' centroids. Branch-free: a batch of refs
+/// is classified first (independent work), then a Lomuto pass swaps every ref with the
+/// first right-side one (unconditionally) and advances that boundary by its class bit.
 uint32_t partition(Ref* refs, uint32_t begin, uint32_t end, const Binner& binner, int axis, int bin, VBox& cleft,
                    VBox& cright) {
-    auto is_left = [&](const Ref& r) {
-        const __m128 c = centroid(load_lo(r), load_hi(r));
-        alignas(16) int32_t b[4];
-        _mm_store_si128(reinterpret_cast<__m128i*>(b), binner.bin(c));
-        if (b[axis] <= bin) {
-            cleft.grow(c);
-            return true;
+    constexpr uint32_t kBatch = 32;
+    const __m128i limit = _mm_set1_epi32(bin);
+    const __m128 pinf = _mm_set1_ps(std::numeric_limits<float>::infinity()), ninf = _mm_sub_ps(_mm_setzero_ps(), pinf);
+    VBox l = cleft, r = cright;
+    uint32_t j = begin;
+    for (uint32_t i0 = begin; i0 < end; i0 += kBatch) {
+        const uint32_t i1 = std::min(end, i0 + kBatch);
+        uint32_t is_left[kBatch];
+        for (uint32_t i = i0; i < i1; ++i) {
+            const __m128 c = centroid(load(refs[i]));
+            const __m128i right = _mm_cmpgt_epi32(binner.bin(c), limit);
+            const int lane = (_mm_movemask_ps(_mm_castsi128_ps(right)) >> axis) & 1;
+            const __m128 m = _mm_castsi128_ps(_mm_set1_epi32(lane - 1));  // all ones: left
+            l.grow(_mm_blendv_ps(pinf, c, m), _mm_blendv_ps(ninf, c, m));
+            r.grow(_mm_blendv_ps(c, pinf, m), _mm_blendv_ps(c, ninf, m));
+            is_left[i - i0] = static_cast<uint32_t>(lane ^ 1);
         }
-        cright.grow(c);
-        return false;
-    };
-    uint32_t first = begin, last = end;
-    while (true) {
-        while (true) {
-            if (first == last) return first;
-            if (is_left(refs[first]))
-                ++first;
-            else
-                break;
+        for (uint32_t i = i0; i < i1; ++i) {
+            const __m256 x = _mm256_load_ps(refs[i].nlo), y = _mm256_load_ps(refs[j].nlo);
+            _mm256_store_ps(refs[i].nlo, y);
+            _mm256_store_ps(refs[j].nlo, x);
+            j += is_left[i - i0];
         }
-        --last;
-        while (true) {
-            if (first == last) return first;
-            if (!is_left(refs[last]))
-                --last;
-            else
-                break;
-        }
-        std::swap(refs[first], refs[last]);
-        ++first;
     }
+    cleft = l;
+    cright = r;
+    return j;
 }
 
 void bounds_of(const Ref* refs, uint32_t begin, uint32_t end, VBox& box, VBox& cbox) {
     for (uint32_t i = begin; i < end; ++i) {
-        const __m128 lo = load_lo(refs[i]), hi = load_hi(refs[i]);
-        box.grow(lo, hi);
-        cbox.grow(centroid(lo, hi));
+        const __m256 v = load(refs[i]);
+        box.grow(negate(low(v)), high(v));
+        cbox.grow(centroid(v));
     }
 }
 
@@ -232,9 +300,23 @@ uint32_t median(Ref* refs, const Task& t) {
         if (c.hi[k] - c.lo[k] > c.hi[axis] - c.lo[axis]) axis = k;
     const uint32_t mid = t.begin + (t.end - t.begin) / 2;
     std::nth_element(refs + t.begin, refs + mid, refs + t.end, [axis](const Ref& a, const Ref& b) {
-        return 0.5f * (a.lo[axis] + a.hi[axis]) < 0.5f * (b.lo[axis] + b.hi[axis]);
+        return 0.5f * (a.hi[axis] - a.nlo[axis]) < 0.5f * (b.hi[axis] - b.nlo[axis]);
     });
     return mid;
+}
+
+/// Asks for transparent huge pages over a large buffer (its whole 4 KiB pages): a build
+/// writes ~200 bytes of fresh memory per triangle, and 4 KiB page faults showed in profiles.
+void advise_huge(void* data, std::size_t bytes) {
+    if (bytes < (std::size_t(4) << 20)) return;
+    const auto begin = (reinterpret_cast<std::uintptr_t>(data) + 4095) & ~std::uintptr_t(4095);
+    const auto end = (reinterpret_cast<std::uintptr_t>(data) + bytes) & ~std::uintptr_t(4095);
+    if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
+}
+template <class T>
+void reserve_huge(std::vector<T>& v, std::size_t n) {
+    v.reserve(n);
+    advise_huge(v.data(), n * sizeof(T));
 }
 
 /// Runs f(0) .. f(n - 1), f(0) on the calling thread.
@@ -265,11 +347,11 @@ bool split_node(Ref* refs, const Task& t, unsigned threads, Task& left, Task& ri
         mid = median(refs, t);  // down to single triangles, as the sequential builder
     } else if (count > 1) {
         const Binner binner(t.cbox, count);
-        Bins bins;
+        Bins bins(binner.n_bins);
         if (threads <= 1) {
             bins.add(refs, t.begin, t.end, binner);
         } else {
-            std::vector<Bins> part(threads);
+            std::vector<Bins> part(threads, Bins(binner.n_bins));
             run_parallel(threads, [&](unsigned i) {
                 part[i].add(refs, slice(t.begin, t.end, i, threads), slice(t.begin, t.end, i + 1, threads), binner);
             });
@@ -374,6 +456,42 @@ void build_subtree(Ref* refs, std::vector<Node>& nodes, uint32_t at, const Task&
     build_subtree(refs, nodes, pair + 1, right);
 }
 
+// relative_down / relative_up of geometry.hpp, with std::nextafter (a libm call, taken for
+// about half the coordinates) replaced by steps on the bits: the same values for every
+// non-NaN input (checked against geometry.hpp on edge cases and random inputs).
+inline float step_down(float f) {  // std::nextafter(f, -inf)
+    if (f == 0.0f) return -std::numeric_limits<float>::denorm_min();
+    if (f == -std::numeric_limits<float>::infinity()) return f;
+    uint32_t b;
+    std::memcpy(&b, &f, sizeof b);
+    b = f > 0.0f ? b - 1 : b + 1;
+    std::memcpy(&f, &b, sizeof f);
+    return f;
+}
+inline float step_up(float f) {  // std::nextafter(f, +inf)
+    if (f == 0.0f) return std::numeric_limits<float>::denorm_min();
+    if (f == std::numeric_limits<float>::infinity()) return f;
+    uint32_t b;
+    std::memcpy(&b, &f, sizeof b);
+    b = f > 0.0f ? b + 1 : b - 1;
+    std::memcpy(&f, &b, sizeof f);
+    return f;
+}
+inline float fast_relative_down(double x, double a) {
+    const double d = x - a, bv = x - d, err = (x - (d + bv)) + (bv - a);
+    float f = static_cast<float>(d);
+    if (static_cast<double>(f) > d) f = step_down(f);
+    if (static_cast<double>(f) - d > err) f = step_down(f);
+    return f;
+}
+inline float fast_relative_up(double x, double a) {
+    const double d = x - a, bv = x - d, err = (x - (d + bv)) + (bv - a);
+    float f = static_cast<float>(d);
+    if (static_cast<double>(f) < d) f = step_up(f);
+    if (static_cast<double>(f) - d < err) f = step_up(f);
+    return f;
+}
+
 /// float lo/hi of a point relative to the anchor (rounded outward).
 struct PointBox {
     float lo[4];
@@ -384,10 +502,13 @@ struct PointBox {
 
 Scene build_scene(const double* points, std::size_t n_points, const uint32_t* triangles, std::size_t n_triangles,
                   unsigned threads) {
+    auto t_last_ = std::chrono::steady_clock::now();
     Scene scene;
     const unsigned n_threads = std::max(1u, threads);
+    reserve_huge(scene.points, 3 * n_points);
     scene.points.assign(points, points + 3 * n_points);
     if (n_triangles == 0) return scene;
+    VRC_T("points");
     const uint32_t n = static_cast<uint32_t>(n_triangles);
     // Fewer threads for small meshes: a thread start costs about as much as ~10^4 triangles.
     const unsigned pthreads = static_cast<unsigned>(std::min<std::size_t>(n_threads, 1 + n_triangles / 16384));
@@ -417,21 +538,26 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         }
     for (int k = 0; k < 3; ++k) scene.anchor[k] = 0.5 * lo_all[k] + 0.5 * hi_all[k];
     for (int k = 0; k < 3; ++k) scene.sphere_center[k] = scene.anchor[k];
+    VRC_T("anchor");
 
     // Each point's float box relative to the anchor, rounded outward. relative_down (up) is
     // the largest (smallest) float below (above) the exact difference, a monotonic function
     // of the coordinate: a triangle's float box is the float box of its points' boxes.
     // Also each point's squared distance to the sphere's centre (the anchor).
-    std::vector<PointBox> pbox(n_points);
-    std::vector<double> pdist(n_points);
+    std::vector<PointBox> pbox;
+    std::vector<double> pdist;
+    reserve_huge(pbox, n_points);
+    reserve_huge(pdist, n_points);
+    pbox.resize(n_points);
+    pdist.resize(n_points);
     run_parallel(pthreads, [&](unsigned t) {
         const auto np = static_cast<uint32_t>(n_points);
         for (uint32_t i = slice(0, np, t, pthreads), e = slice(0, np, t + 1, pthreads); i < e; ++i) {
             const double* p = points + 3 * std::size_t(i);
             double d2 = 0;
             for (int k = 0; k < 3; ++k) {
-                pbox[i].lo[k] = relative_down(p[k], scene.anchor[k]);
-                pbox[i].hi[k] = relative_up(p[k], scene.anchor[k]);
+                pbox[i].lo[k] = fast_relative_down(p[k], scene.anchor[k]);
+                pbox[i].hi[k] = fast_relative_up(p[k], scene.anchor[k]);
                 d2 += (p[k] - scene.sphere_center[k]) * (p[k] - scene.sphere_center[k]);
             }
             pbox[i].lo[3] = pbox[i].hi[3] = 0.0f;
@@ -439,8 +565,13 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         }
     });
 
+    VRC_T("pointbox");
     // The triangles' refs, the root's box and centroid box, the sphere's radius.
-    auto* refs = static_cast<Ref*>(std::aligned_alloc(alignof(Ref), sizeof(Ref) * n_triangles));
+    // 2 MiB aligned, and transparent huge pages asked for: far fewer page faults.
+    const std::size_t refs_bytes = (sizeof(Ref) * n_triangles + (std::size_t(2) << 20) - 1) & ~((std::size_t(2) << 20) - 1);
+    auto* refs = static_cast<Ref*>(std::aligned_alloc(std::size_t(2) << 20, refs_bytes));
+    if (refs == nullptr) throw std::bad_alloc();
+    advise_huge(refs, refs_bytes);
     std::unique_ptr<Ref, void (*)(void*)> refs_owner(refs, std::free);
     std::vector<Task> part_root(pthreads);
     std::vector<double> part_r2(pthreads, 0.0);
@@ -457,7 +588,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
             }
             r2 = std::max(r2, pdist[tri[0]]);
             Ref& r = refs[i];
-            _mm_store_ps(r.lo, lo);
+            _mm_store_ps(r.nlo, negate(lo));
             _mm_store_ps(r.hi, hi);
             r.id = i;
             box.grow(lo, hi);
@@ -477,6 +608,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     scene.sphere_radius = std::sqrt(r2);
     pbox = {};
     pdist = {};
+    VRC_T("refs");
 
     // The top of the tree, each node split by all threads; nodes below top_min (at least
     // 1/8 of a thread's share) become subtrees for one thread each.
@@ -507,6 +639,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         tops.push_back(Top{right});
     }
 
+    VRC_T("top");
     // The subtrees, largest first, each on whichever thread is free.
     std::vector<uint32_t> order(subtree_top.size());
     for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
@@ -520,19 +653,24 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         for (std::size_t j; (j = next_subtree.fetch_add(1)) < order.size();) {
             const Task& t = tops[subtree_top[order[j]]].task;
             std::vector<Node>& nodes = subtrees[order[j]];
-            nodes.reserve(2 * std::size_t(t.end - t.begin) - 1);
+            reserve_huge(nodes, 2 * std::size_t(t.end - t.begin) - 1);
             nodes.emplace_back();
             build_subtree(refs, nodes, 0, t);
         }
     });
 
+    VRC_T("subtrees");
     // Final layout: the order in which a sequential build allocates nodes (sibling pairs,
     // depth first). A subtree's root goes where its parent put it, the rest of it in one
     // block (local node i >= 1 at base + i - 1).
+    if (subtrees.size() == 1) {  // one thread: the subtree is the whole tree, laid out already
+        scene.nodes = std::move(subtrees[0]);
+    } else {
     std::size_t total = 0;
     for (const Top& top : tops)
         if (top.subtree < 0) ++total;
     for (const auto& s : subtrees) total += s.size();
+    reserve_huge(scene.nodes, total);
     scene.nodes.resize(total);
     std::vector<std::pair<uint32_t, uint32_t>> placed(subtrees.size());  // (root position, base)
     uint32_t next = 1;
@@ -572,8 +710,12 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
             std::vector<Node>().swap(subtrees[order[j]]);
         }
     });
+    }
     scene.bounds = scene.nodes[0].box;
+    VRC_T("layout");
 
+    reserve_huge(scene.prim_ids, n_triangles);
+    reserve_huge(scene.triangles, 3 * n_triangles);
     scene.prim_ids.resize(n_triangles);
     scene.triangles.resize(3 * n_triangles);
     run_parallel(pthreads, [&](unsigned t) {
@@ -583,6 +725,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
             for (int c = 0; c < 3; ++c) scene.triangles[3 * std::size_t(i) + c] = triangles[3 * std::size_t(id) + c];
         }
     });
+    VRC_T("gather");
     return scene;
 }
 
