@@ -96,20 +96,18 @@ struct Task {
 /// Bin index of a centroid on each axis (lanes 0..2); the same arithmetic as a scalar
 /// `int((c - lo) * scale)` clamped to [0, n_bins - 1].
 struct Binner {
-    __m128 clo, scale;
+    __m128 clo, scale;  // scale: 0 on an axis with no extent (or an overflowing one)
     __m128i last;
     int n_bins;
-    float scale_k[3];
     Binner(const VBox& cbox, uint32_t count) {
         n_bins = static_cast<int>(std::min<uint32_t>(kBins, std::max<uint32_t>(4, count)));
-        const Box c = cbox.box();
-        for (int k = 0; k < 3; ++k) {
-            const float extent = c.hi[k] - c.lo[k];
-            const float s = extent > 0.0f ? n_bins / extent : 0.0f;
-            scale_k[k] = std::isfinite(s) ? s : 0.0f;
-        }
+        const __m128 extent = _mm_sub_ps(cbox.hi, cbox.lo);
+        const __m128 s = _mm_div_ps(_mm_set1_ps(static_cast<float>(n_bins)), extent);
+        const __m128 finite = _mm_cmplt_ps(_mm_andnot_ps(_mm_set1_ps(-0.0f), s),
+                                           _mm_set1_ps(std::numeric_limits<float>::infinity()));
+        const __m128 use = _mm_and_ps(_mm_cmpgt_ps(extent, _mm_setzero_ps()), finite);
+        scale = _mm_blend_ps(_mm_and_ps(s, use), _mm_setzero_ps(), 8);
         clo = cbox.lo;
-        scale = _mm_setr_ps(scale_k[0], scale_k[1], scale_k[2], 0.0f);
         last = _mm_set1_epi32(n_bins - 1);
     }
     [[nodiscard]] __m128i bin(__m128 c) const {
@@ -145,19 +143,37 @@ struct Bins {
         ++bins.count[b1][1];
         ++bins.count[b2][2];
     }
+    /// Bins a batch: the bin indices of all its refs first (independent arithmetic), then the
+    /// read-modify-writes, whose addresses are then known early (binning ref by ref, the
+    /// next ref's bin loads waited on the previous one's index arithmetic).
     void add(const Ref* refs, uint32_t begin, uint32_t end, const Binner& binner) {
         if (end - begin < kTwoSets) {
             for (uint32_t i = begin; i < end; ++i) add_one(*this, refs[i], binner);
             return;
         }
+        constexpr uint32_t kBatch = 64;
+        alignas(16) int32_t index[kBatch][4];
         Bins other(binner.n_bins);
-        uint32_t i = begin;
-        for (; i + 1 < end; i += 2) {
-            add_one(*this, refs[i], binner);
-            add_one(other, refs[i + 1], binner);
+        for (uint32_t i0 = begin; i0 < end; i0 += kBatch) {
+            const uint32_t n = std::min(kBatch, end - i0);
+            for (uint32_t i = 0; i < n; ++i)
+                _mm_store_si128(reinterpret_cast<__m128i*>(index[i]), binner.bin(centroid(load(refs[i0 + i]))));
+            uint32_t i = 0;
+            for (; i + 1 < n; i += 2) {
+                add_indexed(*this, load(refs[i0 + i]), index[i]);
+                add_indexed(other, load(refs[i0 + i + 1]), index[i + 1]);
+            }
+            if (i < n) add_indexed(*this, load(refs[i0 + i]), index[i]);
         }
-        if (i < end) add_one(*this, refs[i], binner);
         merge(other, binner.n_bins);
+    }
+    static void add_indexed(Bins& bins, __m256 v, const int32_t* b) {
+        bins.box[0][b[0]] = _mm256_max_ps(v, bins.box[0][b[0]]);
+        bins.box[1][b[1]] = _mm256_max_ps(v, bins.box[1][b[1]]);
+        bins.box[2][b[2]] = _mm256_max_ps(v, bins.box[2][b[2]]);
+        ++bins.count[b[0]][0];
+        ++bins.count[b[1]][1];
+        ++bins.count[b[2]][2];
     }
     void merge(const Bins& o, int n_bins) {
         for (int b = 0; b < n_bins; ++b) {
@@ -223,17 +239,36 @@ Split best_split(const Bins& bins, const Binner& binner, uint32_t count, const V
         const __m128 sum = _mm_add_ps(_mm_mul_ps(half_areas(a0, a1, a2), _mm_cvtepi32_ps(n)), _mm_mul_ps(right_area[b + 1], nr));
         _mm_store_ps(cost[b], _mm_add_ps(traversal, _mm_mul_ps(sum, inv_area)));
     }
+    // The scalar choice: the first (axis-major) of the cheapest valid planes, if cheaper than a
+    // leaf. Invalid planes (an empty side, an axis without extent) and NaN costs never win.
     Split best;
-    float best_cost = static_cast<float>(count);  // cost of a leaf
-    for (int k = 0; k < 3; ++k) {
-        if (binner.scale_k[k] == 0.0f) continue;
-        for (int b = 0; b < n_bins - 1; ++b)
-            if (n_left[b][k] > 0 && n_right[b + 1][k] > 0 && cost[b][k] < best_cost) {
-                best_cost = cost[b][k];
-                best.axis = k;
-                best.bin = b;
-            }
+    const float leaf_cost = static_cast<float>(count);
+    const __m128 axis_ok = _mm_cmpneq_ps(binner.scale, _mm_setzero_ps());
+    const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+    __m128 min_cost = inf;
+    __m128i min_bin = _mm_setzero_si128();
+    for (int b = 0; b < n_bins - 1; ++b) {
+        const __m128i nl = _mm_load_si128(reinterpret_cast<const __m128i*>(n_left[b]));
+        const __m128i nr = _mm_load_si128(reinterpret_cast<const __m128i*>(n_right[b + 1]));
+        const __m128 c = _mm_load_ps(cost[b]);
+        const __m128 ok = _mm_and_ps(_mm_and_ps(axis_ok, _mm_cmpord_ps(c, c)),
+                                     _mm_castsi128_ps(_mm_and_si128(_mm_cmpgt_epi32(nl, _mm_setzero_si128()),
+                                                                    _mm_cmpgt_epi32(nr, _mm_setzero_si128()))));
+        const __m128 better = _mm_and_ps(ok, _mm_cmplt_ps(c, min_cost));
+        min_cost = _mm_blendv_ps(min_cost, c, better);
+        min_bin = _mm_blendv_epi8(min_bin, _mm_set1_epi32(b), _mm_castps_si128(better));
     }
+    alignas(16) float mc[4];
+    alignas(16) int32_t mb[4];
+    _mm_store_ps(mc, min_cost);
+    _mm_store_si128(reinterpret_cast<__m128i*>(mb), min_bin);
+    float best_cost = leaf_cost;
+    for (int k = 0; k < 3; ++k)
+        if (mc[k] < best_cost) {
+            best_cost = mc[k];
+            best.axis = k;
+            best.bin = mb[k];
+        }
     if (best.axis >= 0) {
         __m256 l = empty, r = empty;
         for (int b = 0; b < n_bins; ++b) {
@@ -250,38 +285,69 @@ Split best_split(const Bins& bins, const Binner& binner, uint32_t count, const V
 }
 
 /// Partitions refs[begin, end) into those whose centroid bin on `axis` is <= `bin` and the
-/// rest, and accumulates the boxes of both sides' centroids. Branch-free: a batch of refs
-/// is classified first (independent work), then a Lomuto pass swaps every ref with the
-/// first right-side one (unconditionally) and advances that boundary by its class bit.
+/// rest, and accumulates the boxes of both sides' centroids (each ref classified once). A
+/// block partition (after Edelkamp and Weiss 2016, "BlockQuicksort: how branch
+/// mispredictions don't affect quicksort"): 64 refs at each end are classified into a bit
+/// mask, with no branches, then the misplaced ones are swapped pairwise; only misplaced
+/// refs move. The last < 128 refs: a branch-free Lomuto pass over their known classes.
 uint32_t partition(Ref* refs, uint32_t begin, uint32_t end, const Binner& binner, int axis, int bin, VBox& cleft,
                    VBox& cright) {
-    constexpr uint32_t kBatch = 32;
     const __m128i limit = _mm_set1_epi32(bin);
     const __m128 pinf = _mm_set1_ps(std::numeric_limits<float>::infinity()), ninf = _mm_sub_ps(_mm_setzero_ps(), pinf);
     VBox l = cleft, r = cright;
-    uint32_t j = begin;
-    for (uint32_t i0 = begin; i0 < end; i0 += kBatch) {
-        const uint32_t i1 = std::min(end, i0 + kBatch);
-        uint32_t is_left[kBatch];
-        for (uint32_t i = i0; i < i1; ++i) {
-            const __m128 c = centroid(load(refs[i]));
-            const __m128i right = _mm_cmpgt_epi32(binner.bin(c), limit);
-            const int lane = (_mm_movemask_ps(_mm_castsi128_ps(right)) >> axis) & 1;
-            const __m128 m = _mm_castsi128_ps(_mm_set1_epi32(lane - 1));  // all ones: left
-            l.grow(_mm_blendv_ps(pinf, c, m), _mm_blendv_ps(ninf, c, m));
-            r.grow(_mm_blendv_ps(c, pinf, m), _mm_blendv_ps(c, ninf, m));
-            is_left[i - i0] = static_cast<uint32_t>(lane ^ 1);
+    auto is_left = [&](const Ref& ref) -> uint32_t {
+        const __m128 c = centroid(load(ref));
+        const __m128i right = _mm_cmpgt_epi32(binner.bin(c), limit);
+        const int lane = (_mm_movemask_ps(_mm_castsi128_ps(right)) >> axis) & 1;
+        const __m128 m = _mm_castsi128_ps(_mm_set1_epi32(lane - 1));  // all ones: left
+        l.grow(_mm_blendv_ps(pinf, c, m), _mm_blendv_ps(ninf, c, m));
+        r.grow(_mm_blendv_ps(c, pinf, m), _mm_blendv_ps(c, ninf, m));
+        return static_cast<uint32_t>(lane ^ 1);
+    };
+    auto mask_of = [&](uint32_t first, uint32_t want_left) {  // bit k: refs[first + k] is (not) left
+        uint64_t m = 0;
+        for (uint32_t k = 0; k < 64; ++k) m |= uint64_t(is_left(refs[first + k]) ^ want_left ^ 1) << k;
+        return m;
+    };
+    auto swap = [](Ref& a, Ref& b) {
+        const __m256 x = _mm256_load_ps(a.nlo), y = _mm256_load_ps(b.nlo);
+        _mm256_store_ps(a.nlo, y);
+        _mm256_store_ps(b.nlo, x);
+    };
+    uint32_t i = begin, j = end;  // [begin, i) left, [j, end) right
+    uint64_t ml = 0, mr = 0;      // misplaced refs in [i, i + 64) and [j - 64, j), when loaded
+    bool has_l = false, has_r = false;
+    while (true) {
+        if (!has_l || !has_r) {
+            if (j - i < 128) break;
+            if (!has_l) ml = mask_of(i, 0), has_l = true;
+            if (!has_r) mr = mask_of(j - 64, 1), has_r = true;
         }
-        for (uint32_t i = i0; i < i1; ++i) {
-            const __m256 x = _mm256_load_ps(refs[i].nlo), y = _mm256_load_ps(refs[j].nlo);
-            _mm256_store_ps(refs[i].nlo, y);
-            _mm256_store_ps(refs[j].nlo, x);
-            j += is_left[i - i0];
+        for (int n = std::min(_mm_popcnt_u64(ml), _mm_popcnt_u64(mr)); n > 0; --n) {
+            swap(refs[i + _tzcnt_u64(ml)], refs[j - 64 + _tzcnt_u64(mr)]);
+            ml &= ml - 1;
+            mr &= mr - 1;
         }
+        if (ml == 0) i += 64, has_l = false;
+        if (mr == 0) j -= 64, has_r = false;
+    }
+    uint32_t left[128];
+    for (uint32_t p = i; p < j; ++p) {
+        if (has_l && p < i + 64)
+            left[p - i] = static_cast<uint32_t>(((ml >> (p - i)) & 1) ^ 1);
+        else if (has_r && p >= j - 64)
+            left[p - i] = static_cast<uint32_t>((mr >> (p - (j - 64))) & 1);
+        else
+            left[p - i] = is_left(refs[p]);
+    }
+    uint32_t k = i;
+    for (uint32_t p = i; p < j; ++p) {
+        swap(refs[p], refs[k]);
+        k += left[p - i];
     }
     cleft = l;
     cright = r;
-    return j;
+    return k;
 }
 
 void bounds_of(const Ref* refs, uint32_t begin, uint32_t end, VBox& box, VBox& cbox) {
@@ -345,7 +411,7 @@ bool split_node(Ref* refs, const Task& t, unsigned threads, Task& left, Task& ri
     bool split = false;
     if (t.depth >= kMaxSahDepth) {
         mid = median(refs, t);  // down to single triangles, as the sequential builder
-    } else if (count > 1) {
+    } else if (static_cast<float>(count) > kTraversalCost) {  // else no split can cost less than a leaf
         const Binner binner(t.cbox, count);
         Bins bins(binner.n_bins);
         if (threads <= 1) {
