@@ -13,6 +13,7 @@
 #include <atomic>
 #include <cstdlib>
 #include <memory>
+#include <optional>
 #include <cmath>
 #include <cstring>
 #include <thread>
@@ -116,68 +117,67 @@ struct Binner {
     }
 };
 
-/// Per-axis bins: boxes as [-lo, hi] (grown by one max), counts with the axes as lanes.
-/// Consecutive triangles of a mesh tend to fall in the same bins, so larger nodes alternate
-/// between two sets of bins: the read-modify-write of one bin then does not wait on the
-/// previous triangle's.
+/// Per-axis bins: boxes and centroid boxes as [-lo, hi] (grown by one max), counts with the
+/// axes as lanes. Binning also records each ref's three bin indices (one byte each, in
+/// `index[ref]`): the partition then classifies refs from them, 8 at a time.
 struct Bins {
     static constexpr uint32_t kTwoSets = 64;
     __m256 box[3][kBins];
+    __m256 cbox[3][kBins];
     alignas(16) int32_t count[kBins][4];
 
     explicit Bins(int n_bins) {
         const __m256 empty = _mm256_set1_ps(-std::numeric_limits<float>::infinity());
         for (int b = 0; b < n_bins; ++b) {
-            for (int k = 0; k < 3; ++k) box[k][b] = empty;
+            for (int k = 0; k < 3; ++k) box[k][b] = cbox[k][b] = empty;
             _mm_store_si128(reinterpret_cast<__m128i*>(count[b]), _mm_setzero_si128());
         }
     }
-    static void add_one(Bins& bins, const Ref& r, const Binner& binner) {
-        const __m256 v = load(r);
-        const __m128i b = binner.bin(centroid(v));
-        const int b0 = _mm_cvtsi128_si32(b), b1 = _mm_extract_epi32(b, 1), b2 = _mm_extract_epi32(b, 2);
-        bins.box[0][b0] = _mm256_max_ps(v, bins.box[0][b0]);
-        bins.box[1][b1] = _mm256_max_ps(v, bins.box[1][b1]);
-        bins.box[2][b2] = _mm256_max_ps(v, bins.box[2][b2]);
-        ++bins.count[b0][0];
-        ++bins.count[b1][1];
-        ++bins.count[b2][2];
-    }
-    /// Bins a batch: the bin indices of all its refs first (independent arithmetic), then the
-    /// read-modify-writes, whose addresses are then known early (binning ref by ref, the
-    /// next ref's bin loads waited on the previous one's index arithmetic).
-    void add(const Ref* refs, uint32_t begin, uint32_t end, const Binner& binner) {
-        if (end - begin < kTwoSets) {
-            for (uint32_t i = begin; i < end; ++i) add_one(*this, refs[i], binner);
-            return;
-        }
-        constexpr uint32_t kBatch = 64;
-        alignas(16) int32_t index[kBatch][4];
-        Bins other(binner.n_bins);
-        for (uint32_t i0 = begin; i0 < end; i0 += kBatch) {
-            const uint32_t n = std::min(kBatch, end - i0);
-            for (uint32_t i = 0; i < n; ++i)
-                _mm_store_si128(reinterpret_cast<__m128i*>(index[i]), binner.bin(centroid(load(refs[i0 + i]))));
-            uint32_t i = 0;
-            for (; i + 1 < n; i += 2) {
-                add_indexed(*this, load(refs[i0 + i]), index[i]);
-                add_indexed(other, load(refs[i0 + i + 1]), index[i + 1]);
-            }
-            if (i < n) add_indexed(*this, load(refs[i0 + i]), index[i]);
-        }
-        merge(other, binner.n_bins);
-    }
     static void add_indexed(Bins& bins, __m256 v, const int32_t* b) {
+        const __m128 c = centroid(v);
+        const __m256 cv = _mm256_insertf128_ps(_mm256_castps128_ps256(negate(c)), c, 1);
         bins.box[0][b[0]] = _mm256_max_ps(v, bins.box[0][b[0]]);
         bins.box[1][b[1]] = _mm256_max_ps(v, bins.box[1][b[1]]);
         bins.box[2][b[2]] = _mm256_max_ps(v, bins.box[2][b[2]]);
+        bins.cbox[0][b[0]] = _mm256_max_ps(cv, bins.cbox[0][b[0]]);
+        bins.cbox[1][b[1]] = _mm256_max_ps(cv, bins.cbox[1][b[1]]);
+        bins.cbox[2][b[2]] = _mm256_max_ps(cv, bins.cbox[2][b[2]]);
         ++bins.count[b[0]][0];
         ++bins.count[b[1]][1];
         ++bins.count[b[2]][2];
     }
+    /// Bins a batch: the bin indices of all its refs first (independent arithmetic), then the
+    /// read-modify-writes, whose addresses are then known early (binning ref by ref, the
+    /// next ref's bin loads waited on the previous one's index arithmetic). Larger nodes
+    /// alternate between two sets of bins: consecutive triangles of a mesh tend to fall in
+    /// the same bins, and one bin's update would wait on the previous one's.
+    void add(const Ref* refs, uint32_t* index, uint32_t begin, uint32_t end, const Binner& binner) {
+        constexpr uint32_t kBatch = 64;
+        alignas(16) int32_t bin[kBatch][4];
+        const bool two_sets = end - begin >= kTwoSets;
+        std::optional<Bins> second;
+        if (two_sets) second.emplace(binner.n_bins);
+        Bins* other = two_sets ? &*second : this;
+        for (uint32_t i0 = begin; i0 < end; i0 += kBatch) {
+            const uint32_t n = std::min(kBatch, end - i0);
+            for (uint32_t i = 0; i < n; ++i) {
+                const __m128i b = binner.bin(centroid(load(refs[i0 + i])));
+                _mm_store_si128(reinterpret_cast<__m128i*>(bin[i]), b);
+                index[i0 + i] = static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_packus_epi16(_mm_packus_epi32(b, b), b)));
+            }
+            uint32_t i = 0;
+            for (; i + 1 < n; i += 2) {
+                add_indexed(*this, load(refs[i0 + i]), bin[i]);
+                add_indexed(*other, load(refs[i0 + i + 1]), bin[i + 1]);
+            }
+            if (i < n) add_indexed(*this, load(refs[i0 + i]), bin[i]);
+        }
+        if (two_sets) merge(*other, binner.n_bins);
+    }
     void merge(const Bins& o, int n_bins) {
         for (int b = 0; b < n_bins; ++b) {
             for (int k = 0; k < 3; ++k) box[k][b] = _mm256_max_ps(o.box[k][b], box[k][b]);
+            for (int k = 0; k < 3; ++k) cbox[k][b] = _mm256_max_ps(o.cbox[k][b], cbox[k][b]);
             for (int k = 0; k < 3; ++k) count[b][k] += o.count[b][k];
         }
     }
@@ -193,7 +193,8 @@ inline VBox to_vbox(__m256 b) {
 struct Split {
     int axis = -1, bin = 0;
     uint32_t n_left = 0;
-    VBox left, right;
+    VBox left, right;    // the sides' boxes
+    VBox cleft, cright;  // and their centroids' boxes
 };
 
 /// Box::half_area of three boxes ([-lo, hi]) at once, one per lane, in the same arithmetic.
@@ -270,43 +271,40 @@ Split best_split(const Bins& bins, const Binner& binner, uint32_t count, const V
             best.bin = mb[k];
         }
     if (best.axis >= 0) {
-        __m256 l = empty, r = empty;
+        __m256 l = empty, r = empty, cl = empty, cr = empty;
         for (int b = 0; b < n_bins; ++b) {
-            if (b <= best.bin)
+            if (b <= best.bin) {
                 l = _mm256_max_ps(bins.box[best.axis][b], l);
-            else
+                cl = _mm256_max_ps(bins.cbox[best.axis][b], cl);
+            } else {
                 r = _mm256_max_ps(bins.box[best.axis][b], r);
+                cr = _mm256_max_ps(bins.cbox[best.axis][b], cr);
+            }
         }
         best.left = to_vbox(l);
         best.right = to_vbox(r);
+        best.cleft = to_vbox(cl);
+        best.cright = to_vbox(cr);
         best.n_left = static_cast<uint32_t>(n_left[best.bin][best.axis]);
     }
     return best;
 }
 
-/// Partitions refs[begin, end) into those whose centroid bin on `axis` is <= `bin` and the
-/// rest, and accumulates the boxes of both sides' centroids (each ref classified once). A
-/// block partition (after Edelkamp and Weiss 2016, "BlockQuicksort: how branch
-/// mispredictions don't affect quicksort"): 64 refs at each end are classified into a bit
-/// mask, with no branches, then the misplaced ones are swapped pairwise; only misplaced
-/// refs move. The last < 128 refs: a branch-free Lomuto pass over their known classes.
-uint32_t partition(Ref* refs, uint32_t begin, uint32_t end, const Binner& binner, int axis, int bin, VBox& cleft,
-                   VBox& cright) {
-    const __m128i limit = _mm_set1_epi32(bin);
-    const __m128 pinf = _mm_set1_ps(std::numeric_limits<float>::infinity()), ninf = _mm_sub_ps(_mm_setzero_ps(), pinf);
-    VBox l = cleft, r = cright;
-    auto is_left = [&](const Ref& ref) -> uint32_t {
-        const __m128 c = centroid(load(ref));
-        const __m128i right = _mm_cmpgt_epi32(binner.bin(c), limit);
-        const int lane = (_mm_movemask_ps(_mm_castsi128_ps(right)) >> axis) & 1;
-        const __m128 m = _mm_castsi128_ps(_mm_set1_epi32(lane - 1));  // all ones: left
-        l.grow(_mm_blendv_ps(pinf, c, m), _mm_blendv_ps(ninf, c, m));
-        r.grow(_mm_blendv_ps(c, pinf, m), _mm_blendv_ps(c, ninf, m));
-        return static_cast<uint32_t>(lane ^ 1);
-    };
-    auto mask_of = [&](uint32_t first, uint32_t want_left) {  // bit k: refs[first + k] is (not) left
+/// Partitions refs[begin, end) into those whose bin on `axis` (recorded by the binning in
+/// `index`) is <= `bin` and the rest. A block partition (after Edelkamp and Weiss 2016,
+/// "BlockQuicksort: how branch mispredictions don't affect quicksort"): 64 refs at each end
+/// are classified into a bit mask, with no branches, then the misplaced ones are swapped
+/// pairwise; only misplaced refs move. The last < 128: a branch-free Lomuto pass.
+uint32_t partition(Ref* refs, const uint32_t* index, uint32_t begin, uint32_t end, int axis, int bin) {
+    const __m128i shift = _mm_cvtsi32_si128(8 * axis);
+    const __m256i limit = _mm256_set1_epi32(bin), byte = _mm256_set1_epi32(0xff);
+    auto right_of = [&](uint32_t first) {  // bit k: refs[first + k] goes right
         uint64_t m = 0;
-        for (uint32_t k = 0; k < 64; ++k) m |= uint64_t(is_left(refs[first + k]) ^ want_left ^ 1) << k;
+        for (uint32_t q = 0; q < 64; q += 8) {
+            const __m256i b = _mm256_and_si256(
+                _mm256_srl_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(index + first + q)), shift), byte);
+            m |= uint64_t(uint32_t(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(b, limit))))) << q;
+        }
         return m;
     };
     auto swap = [](Ref& a, Ref& b) {
@@ -320,10 +318,10 @@ uint32_t partition(Ref* refs, uint32_t begin, uint32_t end, const Binner& binner
     while (true) {
         if (!has_l || !has_r) {
             if (j - i < 128) break;
-            if (!has_l) ml = mask_of(i, 0), has_l = true;
-            if (!has_r) mr = mask_of(j - 64, 1), has_r = true;
+            if (!has_l) ml = right_of(i), has_l = true;
+            if (!has_r) mr = ~right_of(j - 64), has_r = true;
         }
-        for (int n = std::min(_mm_popcnt_u64(ml), _mm_popcnt_u64(mr)); n > 0; --n) {
+        for (int n = static_cast<int>(std::min(_mm_popcnt_u64(ml), _mm_popcnt_u64(mr))); n > 0; --n) {
             swap(refs[i + _tzcnt_u64(ml)], refs[j - 64 + _tzcnt_u64(mr)]);
             ml &= ml - 1;
             mr &= mr - 1;
@@ -338,15 +336,13 @@ uint32_t partition(Ref* refs, uint32_t begin, uint32_t end, const Binner& binner
         else if (has_r && p >= j - 64)
             left[p - i] = static_cast<uint32_t>((mr >> (p - (j - 64))) & 1);
         else
-            left[p - i] = is_left(refs[p]);
+            left[p - i] = static_cast<uint32_t>(static_cast<int>((index[p] >> (8 * axis)) & 0xff) <= bin);
     }
     uint32_t k = i;
     for (uint32_t p = i; p < j; ++p) {
         swap(refs[p], refs[k]);
         k += left[p - i];
     }
-    cleft = l;
-    cright = r;
     return k;
 }
 
@@ -405,7 +401,7 @@ inline uint32_t slice(uint32_t begin, uint32_t end, unsigned t, unsigned n) {
 
 /// The split of one node, decided (and the triangles partitioned) by one thread or by all.
 /// Returns false for a leaf; otherwise fills the two children's tasks.
-bool split_node(Ref* refs, const Task& t, unsigned threads, Task& left, Task& right) {
+bool split_node(Ref* refs, uint32_t* index, const Task& t, unsigned threads, Task& left, Task& right) {
     const uint32_t count = t.end - t.begin;
     uint32_t mid = t.begin;
     bool split = false;
@@ -415,39 +411,35 @@ bool split_node(Ref* refs, const Task& t, unsigned threads, Task& left, Task& ri
         const Binner binner(t.cbox, count);
         Bins bins(binner.n_bins);
         if (threads <= 1) {
-            bins.add(refs, t.begin, t.end, binner);
+            bins.add(refs, index, t.begin, t.end, binner);
         } else {
             std::vector<Bins> part(threads, Bins(binner.n_bins));
             run_parallel(threads, [&](unsigned i) {
-                part[i].add(refs, slice(t.begin, t.end, i, threads), slice(t.begin, t.end, i + 1, threads), binner);
+                part[i].add(refs, index, slice(t.begin, t.end, i, threads), slice(t.begin, t.end, i + 1, threads), binner);
             });
             bins = part[0];
             for (unsigned i = 1; i < threads; ++i) bins.merge(part[i], binner.n_bins);
         }
         const Split s = best_split(bins, binner, count, t.box);
         if (s.axis >= 0) {
-            left.cbox = right.cbox = VBox{};
             if (threads <= 1) {
-                mid = partition(refs, t.begin, t.end, binner, s.axis, s.bin, left.cbox, right.cbox);
+                mid = partition(refs, index, t.begin, t.end, s.axis, s.bin);
             } else {
                 mid = t.begin + s.n_left;
                 struct Part {
                     uint32_t begin, mid, end;
-                    VBox cl, cr;
                 };
                 std::vector<Part> part(threads);
                 run_parallel(threads, [&](unsigned i) {
                     Part& p = part[i];
                     p.begin = slice(t.begin, t.end, i, threads);
                     p.end = slice(t.begin, t.end, i + 1, threads);
-                    p.mid = partition(refs, p.begin, p.end, binner, s.axis, s.bin, p.cl, p.cr);
+                    p.mid = partition(refs, index, p.begin, p.end, s.axis, s.bin);
                 });
                 // Right-side runs that lie left of `mid` and left-side runs right of it: as
                 // many of each; swap them pairwise, in parallel slices.
                 std::vector<std::pair<uint32_t, uint32_t>> wrong_r, wrong_l;
                 for (const Part& p : part) {
-                    left.cbox.grow(p.cl);
-                    right.cbox.grow(p.cr);
                     if (p.mid < mid) wrong_r.emplace_back(p.mid, std::min(p.end, mid));
                     if (p.mid > mid) wrong_l.emplace_back(std::max(p.begin, mid), p.mid);
                 }
@@ -484,6 +476,8 @@ bool split_node(Ref* refs, const Task& t, unsigned threads, Task& left, Task& ri
             }
             left.box = s.left;
             right.box = s.right;
+            left.cbox = s.cleft;
+            right.cbox = s.cright;
             split = true;
         } else if (count > kMaxLeaf) {
             mid = median(refs, t);
@@ -505,10 +499,10 @@ bool split_node(Ref* refs, const Task& t, unsigned threads, Task& left, Task& ri
 
 /// Builds a subtree sequentially into `nodes` (its root at nodes[at]), allocating sibling
 /// pairs in depth-first order.
-void build_subtree(Ref* refs, std::vector<Node>& nodes, uint32_t at, const Task& t) {
+void build_subtree(Ref* refs, uint32_t* index, std::vector<Node>& nodes, uint32_t at, const Task& t) {
     Task left, right;
     nodes[at].box = t.box.box();
-    if (!split_node(refs, t, 1, left, right)) {
+    if (!split_node(refs, index, t, 1, left, right)) {
         nodes[at].index = t.begin;
         nodes[at].count = t.end - t.begin;
         return;
@@ -518,8 +512,8 @@ void build_subtree(Ref* refs, std::vector<Node>& nodes, uint32_t at, const Task&
     nodes[at].count = 0;
     nodes.emplace_back();
     nodes.emplace_back();
-    build_subtree(refs, nodes, pair, left);
-    build_subtree(refs, nodes, pair + 1, right);
+    build_subtree(refs, index, nodes, pair, left);
+    build_subtree(refs, index, nodes, pair + 1, right);
 }
 
 // relative_down / relative_up of geometry.hpp, with std::nextafter (a libm call, taken for
@@ -686,6 +680,9 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     };
     const uint32_t top_min = std::max<uint32_t>(kMinTopNode, n / (8 * pthreads));
     std::vector<Top> tops;
+    std::vector<uint32_t> index;  // each ref's bin indices, while its node is split
+    reserve_huge(index, n);
+    index.resize(n);
     std::vector<uint32_t> subtree_top;  // top node of each subtree
     tops.push_back(Top{root});
     for (std::size_t i = 0; i < tops.size(); ++i) {
@@ -696,7 +693,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
             continue;
         }
         Task left, right;
-        if (!split_node(refs, t, pthreads, left, right)) {
+        if (!split_node(refs, index.data(), t, pthreads, left, right)) {
             tops[i].leaf = true;
             continue;
         }
@@ -721,7 +718,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
             std::vector<Node>& nodes = subtrees[order[j]];
             reserve_huge(nodes, 2 * std::size_t(t.end - t.begin) - 1);
             nodes.emplace_back();
-            build_subtree(refs, nodes, 0, t);
+            build_subtree(refs, index.data(), nodes, 0, t);
         }
     });
 
