@@ -381,6 +381,14 @@ void reserve_huge(std::vector<T>& v, std::size_t n) {
     advise_huge(v.data(), n * sizeof(T));
 }
 
+/// An uninitialised buffer (no zero fill: fresh memory showed in profiles), huge pages asked.
+template <class T>
+std::unique_ptr<T[]> scratch(std::size_t n) {
+    std::unique_ptr<T[]> p(new T[n]);
+    advise_huge(p.get(), n * sizeof(T));
+    return p;
+}
+
 /// Runs f(0) .. f(n - 1), f(0) on the calling thread.
 template <class F>
 void run_parallel(unsigned n, F&& f) {
@@ -604,12 +612,8 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     // the largest (smallest) float below (above) the exact difference, a monotonic function
     // of the coordinate: a triangle's float box is the float box of its points' boxes.
     // Also each point's squared distance to the sphere's centre (the anchor).
-    std::vector<PointBox> pbox;
-    std::vector<double> pdist;
-    reserve_huge(pbox, n_points);
-    reserve_huge(pdist, n_points);
-    pbox.resize(n_points);
-    pdist.resize(n_points);
+    auto pbox = scratch<PointBox>(n_points);
+    auto pdist = scratch<double>(n_points);
     run_parallel(pthreads, [&](unsigned t) {
         const auto np = static_cast<uint32_t>(n_points);
         for (uint32_t i = slice(0, np, t, pthreads), e = slice(0, np, t + 1, pthreads); i < e; ++i) {
@@ -666,8 +670,8 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         r2 = std::max(r2, part_r2[t]);
     }
     scene.sphere_radius = std::sqrt(r2);
-    pbox = {};
-    pdist = {};
+    pbox.reset();
+    pdist.reset();
     VRC_T("refs");
 
     // The top of the tree, each node split by all threads; nodes below top_min (at least
@@ -680,9 +684,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     };
     const uint32_t top_min = std::max<uint32_t>(kMinTopNode, n / (8 * pthreads));
     std::vector<Top> tops;
-    std::vector<uint32_t> index;  // each ref's bin indices, while its node is split
-    reserve_huge(index, n);
-    index.resize(n);
+    auto index = scratch<uint32_t>(n);  // each ref's bin indices, while its node is split
     std::vector<uint32_t> subtree_top;  // top node of each subtree
     tops.push_back(Top{root});
     for (std::size_t i = 0; i < tops.size(); ++i) {
@@ -693,7 +695,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
             continue;
         }
         Task left, right;
-        if (!split_node(refs, index.data(), t, pthreads, left, right)) {
+        if (!split_node(refs, index.get(), t, pthreads, left, right)) {
             tops[i].leaf = true;
             continue;
         }
@@ -718,7 +720,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
             std::vector<Node>& nodes = subtrees[order[j]];
             reserve_huge(nodes, 2 * std::size_t(t.end - t.begin) - 1);
             nodes.emplace_back();
-            build_subtree(refs, index.data(), nodes, 0, t);
+            build_subtree(refs, index.get(), nodes, 0, t);
         }
     });
 
