@@ -13,7 +13,6 @@
 #include <atomic>
 #include <cstdlib>
 #include <memory>
-#include <optional>
 #include <cmath>
 #include <cstring>
 #include <thread>
@@ -126,22 +125,32 @@ struct Bins {
     __m256 cbox[3][kBins];
     alignas(16) int32_t count[kBins][4];
 
-    explicit Bins(int n_bins) {
+    bool centroids;  // with centroid boxes (large nodes; small ones bound their children's after the partition)
+
+    Bins() = default;  // uninitialised: reset() before use
+    Bins(int n_bins, bool with_centroids) { reset(n_bins, with_centroids); }
+    void reset(int n_bins, bool with_centroids) {
+        centroids = with_centroids;
         const __m256 empty = _mm256_set1_ps(-std::numeric_limits<float>::infinity());
         for (int b = 0; b < n_bins; ++b) {
-            for (int k = 0; k < 3; ++k) box[k][b] = cbox[k][b] = empty;
+            for (int k = 0; k < 3; ++k) box[k][b] = empty;
+            if (centroids)
+                for (int k = 0; k < 3; ++k) cbox[k][b] = empty;
             _mm_store_si128(reinterpret_cast<__m128i*>(count[b]), _mm_setzero_si128());
         }
     }
+    template <bool kCentroids>
     static void add_indexed(Bins& bins, __m256 v, const int32_t* b) {
-        const __m128 c = centroid(v);
-        const __m256 cv = _mm256_insertf128_ps(_mm256_castps128_ps256(negate(c)), c, 1);
         bins.box[0][b[0]] = _mm256_max_ps(v, bins.box[0][b[0]]);
         bins.box[1][b[1]] = _mm256_max_ps(v, bins.box[1][b[1]]);
         bins.box[2][b[2]] = _mm256_max_ps(v, bins.box[2][b[2]]);
-        bins.cbox[0][b[0]] = _mm256_max_ps(cv, bins.cbox[0][b[0]]);
-        bins.cbox[1][b[1]] = _mm256_max_ps(cv, bins.cbox[1][b[1]]);
-        bins.cbox[2][b[2]] = _mm256_max_ps(cv, bins.cbox[2][b[2]]);
+        if (kCentroids) {
+            const __m128 c = centroid(v);
+            const __m256 cv = _mm256_insertf128_ps(_mm256_castps128_ps256(negate(c)), c, 1);
+            bins.cbox[0][b[0]] = _mm256_max_ps(cv, bins.cbox[0][b[0]]);
+            bins.cbox[1][b[1]] = _mm256_max_ps(cv, bins.cbox[1][b[1]]);
+            bins.cbox[2][b[2]] = _mm256_max_ps(cv, bins.cbox[2][b[2]]);
+        }
         ++bins.count[b[0]][0];
         ++bins.count[b[1]][1];
         ++bins.count[b[2]][2];
@@ -152,12 +161,19 @@ struct Bins {
     /// alternate between two sets of bins: consecutive triangles of a mesh tend to fall in
     /// the same bins, and one bin's update would wait on the previous one's.
     void add(const Ref* refs, uint32_t* index, uint32_t begin, uint32_t end, const Binner& binner) {
+        if (centroids)
+            add_impl<true>(refs, index, begin, end, binner);
+        else
+            add_impl<false>(refs, index, begin, end, binner);
+    }
+    template <bool kCentroids>
+    void add_impl(const Ref* refs, uint32_t* index, uint32_t begin, uint32_t end, const Binner& binner) {
         constexpr uint32_t kBatch = 64;
         alignas(16) int32_t bin[kBatch][4];
         const bool two_sets = end - begin >= kTwoSets;
-        std::optional<Bins> second;
-        if (two_sets) second.emplace(binner.n_bins);
-        Bins* other = two_sets ? &*second : this;
+        Bins second;
+        if (two_sets) second.reset(binner.n_bins, centroids);
+        Bins* other = two_sets ? &second : this;
         for (uint32_t i0 = begin; i0 < end; i0 += kBatch) {
             const uint32_t n = std::min(kBatch, end - i0);
             for (uint32_t i = 0; i < n; ++i) {
@@ -167,17 +183,18 @@ struct Bins {
             }
             uint32_t i = 0;
             for (; i + 1 < n; i += 2) {
-                add_indexed(*this, load(refs[i0 + i]), bin[i]);
-                add_indexed(*other, load(refs[i0 + i + 1]), bin[i + 1]);
+                add_indexed<kCentroids>(*this, load(refs[i0 + i]), bin[i]);
+                add_indexed<kCentroids>(*other, load(refs[i0 + i + 1]), bin[i + 1]);
             }
-            if (i < n) add_indexed(*this, load(refs[i0 + i]), bin[i]);
+            if (i < n) add_indexed<kCentroids>(*this, load(refs[i0 + i]), bin[i]);
         }
         if (two_sets) merge(*other, binner.n_bins);
     }
     void merge(const Bins& o, int n_bins) {
         for (int b = 0; b < n_bins; ++b) {
             for (int k = 0; k < 3; ++k) box[k][b] = _mm256_max_ps(o.box[k][b], box[k][b]);
-            for (int k = 0; k < 3; ++k) cbox[k][b] = _mm256_max_ps(o.cbox[k][b], cbox[k][b]);
+            if (centroids)
+                for (int k = 0; k < 3; ++k) cbox[k][b] = _mm256_max_ps(o.cbox[k][b], cbox[k][b]);
             for (int k = 0; k < 3; ++k) count[b][k] += o.count[b][k];
         }
     }
@@ -275,10 +292,10 @@ Split best_split(const Bins& bins, const Binner& binner, uint32_t count, const V
         for (int b = 0; b < n_bins; ++b) {
             if (b <= best.bin) {
                 l = _mm256_max_ps(bins.box[best.axis][b], l);
-                cl = _mm256_max_ps(bins.cbox[best.axis][b], cl);
+                if (bins.centroids) cl = _mm256_max_ps(bins.cbox[best.axis][b], cl);
             } else {
                 r = _mm256_max_ps(bins.box[best.axis][b], r);
-                cr = _mm256_max_ps(bins.cbox[best.axis][b], cr);
+                if (bins.centroids) cr = _mm256_max_ps(bins.cbox[best.axis][b], cr);
             }
         }
         best.left = to_vbox(l);
@@ -417,11 +434,11 @@ bool split_node(Ref* refs, uint32_t* index, const Task& t, unsigned threads, Tas
         mid = median(refs, t);  // down to single triangles, as the sequential builder
     } else if (static_cast<float>(count) > kTraversalCost) {  // else no split can cost less than a leaf
         const Binner binner(t.cbox, count);
-        Bins bins(binner.n_bins);
+        Bins bins(binner.n_bins, count >= Bins::kTwoSets);
         if (threads <= 1) {
             bins.add(refs, index, t.begin, t.end, binner);
         } else {
-            std::vector<Bins> part(threads, Bins(binner.n_bins));
+            std::vector<Bins> part(threads, Bins(binner.n_bins, true));
             run_parallel(threads, [&](unsigned i) {
                 part[i].add(refs, index, slice(t.begin, t.end, i, threads), slice(t.begin, t.end, i + 1, threads), binner);
             });
@@ -484,8 +501,14 @@ bool split_node(Ref* refs, uint32_t* index, const Task& t, unsigned threads, Tas
             }
             left.box = s.left;
             right.box = s.right;
-            left.cbox = s.cleft;
-            right.cbox = s.cright;
+            if (bins.centroids) {
+                left.cbox = s.cleft;
+                right.cbox = s.cright;
+            } else {
+                left.cbox = right.cbox = VBox{};
+                for (uint32_t i = t.begin; i < mid; ++i) left.cbox.grow(centroid(load(refs[i])));
+                for (uint32_t i = mid; i < t.end; ++i) right.cbox.grow(centroid(load(refs[i])));
+            }
             split = true;
         } else if (count > kMaxLeaf) {
             mid = median(refs, t);
