@@ -20,9 +20,6 @@
 #include <immintrin.h>
 #include <sys/mman.h>
 #include <new>
-#include <chrono>
-#include <cstdio>
-#define VRC_T(name) do { if (std::getenv("VRC_BUILD_TIMING")) { auto now_ = std::chrono::steady_clock::now(); std::fprintf(stderr, "%-10s %7.2f ms\n", name, std::chrono::duration<double, std::milli>(now_ - t_last_).count()); t_last_ = now_; } } while (0)
 
 #include "bvh.hpp"
 
@@ -378,8 +375,11 @@ uint32_t median(Ref* refs, const Task& t) {
     for (int k = 1; k < 3; ++k)
         if (c.hi[k] - c.lo[k] > c.hi[axis] - c.lo[axis]) axis = k;
     const uint32_t mid = t.begin + (t.end - t.begin) / 2;
+    // Ties broken by id: the halves do not depend on the refs' order (which the parallel
+    // partition of the top nodes changes), so neither does the tree.
     std::nth_element(refs + t.begin, refs + mid, refs + t.end, [axis](const Ref& a, const Ref& b) {
-        return 0.5f * (a.hi[axis] - a.nlo[axis]) < 0.5f * (b.hi[axis] - b.nlo[axis]);
+        const float ca = 0.5f * (a.hi[axis] - a.nlo[axis]), cb = 0.5f * (b.hi[axis] - b.nlo[axis]);
+        return ca < cb || (ca == cb && a.id < b.id);
     });
     return mid;
 }
@@ -593,13 +593,11 @@ struct PointBox {
 
 Scene build_scene(const double* points, std::size_t n_points, const uint32_t* triangles, std::size_t n_triangles,
                   unsigned threads) {
-    auto t_last_ = std::chrono::steady_clock::now();
     Scene scene;
     const unsigned n_threads = std::max(1u, threads);
     reserve_huge(scene.points, 3 * n_points);
     scene.points.assign(points, points + 3 * n_points);
     if (n_triangles == 0) return scene;
-    VRC_T("points");
     const uint32_t n = static_cast<uint32_t>(n_triangles);
     // Fewer threads for small meshes: a thread start costs about as much as ~10^4 triangles.
     const unsigned pthreads = static_cast<unsigned>(std::min<std::size_t>(n_threads, 1 + n_triangles / 16384));
@@ -629,7 +627,6 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         }
     for (int k = 0; k < 3; ++k) scene.anchor[k] = 0.5 * lo_all[k] + 0.5 * hi_all[k];
     for (int k = 0; k < 3; ++k) scene.sphere_center[k] = scene.anchor[k];
-    VRC_T("anchor");
 
     // Each point's float box relative to the anchor, rounded outward. relative_down (up) is
     // the largest (smallest) float below (above) the exact difference, a monotonic function
@@ -652,7 +649,6 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         }
     });
 
-    VRC_T("pointbox");
     // The triangles' refs, the root's box and centroid box, the sphere's radius.
     // 2 MiB aligned, and transparent huge pages asked for: far fewer page faults.
     const std::size_t refs_bytes = (sizeof(Ref) * n_triangles + (std::size_t(2) << 20) - 1) & ~((std::size_t(2) << 20) - 1);
@@ -695,7 +691,6 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     scene.sphere_radius = std::sqrt(r2);
     pbox.reset();
     pdist.reset();
-    VRC_T("refs");
 
     // The top of the tree, each node split by all threads; nodes below top_min (at least
     // 1/8 of a thread's share) become subtrees for one thread each.
@@ -727,7 +722,6 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         tops.push_back(Top{right});
     }
 
-    VRC_T("top");
     // The subtrees, largest first, each on whichever thread is free.
     std::vector<uint32_t> order(subtree_top.size());
     for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
@@ -747,7 +741,6 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         }
     });
 
-    VRC_T("subtrees");
     // Final layout: the order in which a sequential build allocates nodes (sibling pairs,
     // depth first). A subtree's root goes where its parent put it, the rest of it in one
     // block (local node i >= 1 at base + i - 1).
@@ -800,7 +793,6 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     });
     }
     scene.bounds = scene.nodes[0].box;
-    VRC_T("layout");
 
     reserve_huge(scene.prim_ids, n_triangles);
     reserve_huge(scene.triangles, 3 * n_triangles);
@@ -813,7 +805,6 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
             for (int c = 0; c < 3; ++c) scene.triangles[3 * std::size_t(i) + c] = triangles[3 * std::size_t(id) + c];
         }
     });
-    VRC_T("gather");
     return scene;
 }
 
