@@ -432,7 +432,9 @@ inline uint32_t slice(uint32_t begin, uint32_t end, unsigned t, unsigned n) {
 
 /// The split of one node, decided (and the triangles partitioned) by one thread or by all.
 /// Returns false for a leaf; otherwise fills the two children's tasks.
-bool split_node(Ref* refs, uint32_t* index, const Task& t, unsigned threads, Task& left, Task& right) {
+/// The split of one node (binned SAH, or a median split), its triangles partitioned.
+/// Returns false for a leaf; otherwise fills the two children's tasks.
+bool split_node(Ref* refs, uint32_t* index, const Task& t, Task& left, Task& right) {
     const uint32_t count = t.end - t.begin;
     uint32_t mid = t.begin;
     bool split = false;
@@ -441,70 +443,10 @@ bool split_node(Ref* refs, uint32_t* index, const Task& t, unsigned threads, Tas
     } else if (static_cast<float>(count) > kTraversalCost) {  // else no split can cost less than a leaf
         const Binner binner(t.cbox, count);
         Bins bins(binner.n_bins, count >= Bins::kTwoSets);
-        if (threads <= 1) {
-            bins.add(refs, index, t.begin, t.end, binner);
-        } else {
-            std::vector<Bins> part(threads, Bins(binner.n_bins, true));
-            run_parallel(threads, [&](unsigned i) {
-                part[i].add(refs, index, slice(t.begin, t.end, i, threads), slice(t.begin, t.end, i + 1, threads), binner);
-            });
-            bins = part[0];
-            for (unsigned i = 1; i < threads; ++i) bins.merge(part[i], binner.n_bins);
-        }
+        bins.add(refs, index, t.begin, t.end, binner);
         const Split s = best_split(bins, binner, count, t.box);
         if (s.axis >= 0) {
-            if (threads <= 1) {
-                mid = partition(refs, index, t.begin, t.end, s.axis, s.bin);
-            } else {
-                mid = t.begin + s.n_left;
-                struct Part {
-                    uint32_t begin, mid, end;
-                };
-                std::vector<Part> part(threads);
-                run_parallel(threads, [&](unsigned i) {
-                    Part& p = part[i];
-                    p.begin = slice(t.begin, t.end, i, threads);
-                    p.end = slice(t.begin, t.end, i + 1, threads);
-                    p.mid = partition(refs, index, p.begin, p.end, s.axis, s.bin);
-                });
-                // Right-side runs that lie left of `mid` and left-side runs right of it: as
-                // many of each; swap them pairwise, in parallel slices.
-                std::vector<std::pair<uint32_t, uint32_t>> wrong_r, wrong_l;
-                for (const Part& p : part) {
-                    if (p.mid < mid) wrong_r.emplace_back(p.mid, std::min(p.end, mid));
-                    if (p.mid > mid) wrong_l.emplace_back(std::max(p.begin, mid), p.mid);
-                }
-                uint64_t n_wrong = 0;
-                for (auto& r : wrong_r) n_wrong += r.second - r.first;
-                auto locate = [](const std::vector<std::pair<uint32_t, uint32_t>>& runs, uint64_t k, std::size_t& run,
-                                 uint32_t& pos) {
-                    run = 0;
-                    while (k >= runs[run].second - runs[run].first) {
-                        k -= runs[run].second - runs[run].first;
-                        ++run;
-                    }
-                    pos = runs[run].first + static_cast<uint32_t>(k);
-                };
-                if (n_wrong > 0)
-                    run_parallel(threads, [&](unsigned i) {
-                        const uint64_t k0 = n_wrong * i / threads, k1 = n_wrong * (i + 1) / threads;
-                        if (k0 == k1) return;
-                        std::size_t ra, rb;
-                        uint32_t a, b;
-                        locate(wrong_r, k0, ra, a);
-                        locate(wrong_l, k0, rb, b);
-                        for (uint64_t k = k0; k < k1;) {
-                            if (a == wrong_r[ra].second) a = wrong_r[++ra].first;
-                            if (b == wrong_l[rb].second) b = wrong_l[++rb].first;
-                            const uint32_t n = static_cast<uint32_t>(
-                                std::min<uint64_t>({k1 - k, wrong_r[ra].second - a, wrong_l[rb].second - b}));
-                            std::swap_ranges(refs + a, refs + a + n, refs + b);
-                            a += n;
-                            b += n;
-                            k += n;
-                        }
-                    });
-            }
+            mid = partition(refs, index, t.begin, t.end, s.axis, s.bin);
             left.box = s.left;
             right.box = s.right;
             if (bins.centroids) {
@@ -534,12 +476,128 @@ bool split_node(Ref* refs, uint32_t* index, const Task& t, unsigned threads, Tas
     return true;
 }
 
+/// Runs job(0) .. job(n_jobs - 1) on `threads` threads, each taking the next job free.
+template <class F>
+void run_jobs(unsigned threads, std::size_t n_jobs, F&& job) {
+    std::atomic<std::size_t> next{0};
+    run_parallel(static_cast<unsigned>(std::min<std::size_t>(threads, n_jobs)), [&](unsigned) {
+        for (std::size_t k; (k = next.fetch_add(1)) < n_jobs;) job(k);
+    });
+}
+
+/// Splits the nodes of one level of the top of the tree, all threads on each node: every
+/// node cut into slices (a fixed number, whichever thread takes them: the result does not
+/// depend on the threads), each slice binned, the bins merged; each slice partitioned,
+/// then the right-side runs left of the node's split and the left-side runs right of it
+/// (as many refs each) swapped pairwise. Three joins per level, not per node.
+void split_level(Ref* refs, uint32_t* index, const std::vector<Task>& tasks, unsigned threads, std::vector<char>& is_split,
+                 std::vector<Task>& lefts, std::vector<Task>& rights) {
+    const std::size_t m = tasks.size();
+    const unsigned n_slices = 4 * threads;
+    auto bounds = [&](std::size_t job, uint32_t& b, uint32_t& e) {
+        const Task& t = tasks[job / n_slices];
+        b = slice(t.begin, t.end, static_cast<unsigned>(job % n_slices), n_slices);
+        e = slice(t.begin, t.end, static_cast<unsigned>(job % n_slices) + 1, n_slices);
+    };
+    std::vector<Binner> binners;
+    std::vector<char> sah(m);
+    for (std::size_t j = 0; j < m; ++j) {
+        binners.emplace_back(tasks[j].cbox, tasks[j].end - tasks[j].begin);
+        sah[j] = tasks[j].depth < kMaxSahDepth && static_cast<float>(tasks[j].end - tasks[j].begin) > kTraversalCost;
+    }
+    std::vector<Bins> bins(m * n_slices);
+    run_jobs(threads, m * n_slices, [&](std::size_t job) {
+        const std::size_t j = job / n_slices;
+        if (!sah[j]) return;
+        uint32_t b, e;
+        bounds(job, b, e);
+        bins[job].reset(binners[j].n_bins, true);
+        bins[job].add(refs, index, b, e, binners[j]);
+    });
+    std::vector<Split> splits(m);
+    for (std::size_t j = 0; j < m; ++j) {
+        if (!sah[j]) continue;
+        for (unsigned q = 1; q < n_slices; ++q) bins[j * n_slices].merge(bins[j * n_slices + q], binners[j].n_bins);
+        splits[j] = best_split(bins[j * n_slices], binners[j], tasks[j].end - tasks[j].begin, tasks[j].box);
+    }
+    std::vector<uint32_t> mids(m * n_slices);
+    run_jobs(threads, m * n_slices, [&](std::size_t job) {
+        const Split& s = splits[job / n_slices];
+        if (s.axis < 0) return;
+        uint32_t b, e;
+        bounds(job, b, e);
+        mids[job] = partition(refs, index, b, e, s.axis, s.bin);
+    });
+    using Runs = std::vector<std::pair<uint32_t, uint32_t>>;
+    std::vector<Runs> wrong_r(m), wrong_l(m);
+    std::vector<uint64_t> n_wrong(m, 0);
+    for (std::size_t j = 0; j < m; ++j) {
+        if (splits[j].axis < 0) continue;
+        const uint32_t mid = tasks[j].begin + splits[j].n_left;
+        for (unsigned q = 0; q < n_slices; ++q) {
+            uint32_t b, e;
+            bounds(j * n_slices + q, b, e);
+            const uint32_t pm = mids[j * n_slices + q];
+            if (pm < mid) wrong_r[j].emplace_back(pm, std::min(e, mid));
+            if (pm > mid) wrong_l[j].emplace_back(std::max(b, mid), pm);
+        }
+        for (auto& r : wrong_r[j]) n_wrong[j] += r.second - r.first;
+    }
+    auto locate = [](const Runs& runs, uint64_t k, std::size_t& run, uint32_t& pos) {
+        run = 0;
+        while (k >= runs[run].second - runs[run].first) {
+            k -= runs[run].second - runs[run].first;
+            ++run;
+        }
+        pos = runs[run].first + static_cast<uint32_t>(k);
+    };
+    run_jobs(threads, m * n_slices, [&](std::size_t job) {
+        const std::size_t j = job / n_slices;
+        const unsigned q = static_cast<unsigned>(job % n_slices);
+        const uint64_t k0 = n_wrong[j] * q / n_slices, k1 = n_wrong[j] * (q + 1) / n_slices;
+        if (k0 == k1) return;
+        const Runs &wr = wrong_r[j], &wl = wrong_l[j];
+        std::size_t ra, rb;
+        uint32_t a, b;
+        locate(wr, k0, ra, a);
+        locate(wl, k0, rb, b);
+        for (uint64_t k = k0; k < k1;) {
+            if (a == wr[ra].second) a = wr[++ra].first;
+            if (b == wl[rb].second) b = wl[++rb].first;
+            const auto n = static_cast<uint32_t>(std::min<uint64_t>({k1 - k, wr[ra].second - a, wl[rb].second - b}));
+            std::swap_ranges(refs + a, refs + a + n, refs + b);
+            a += n;
+            b += n;
+            k += n;
+        }
+    });
+    for (std::size_t j = 0; j < m; ++j) {
+        const Task& t = tasks[j];
+        const Split& s = splits[j];
+        if (s.axis < 0) {  // depth limit, or no SAH split: as the sequential builder
+            is_split[j] = split_node(refs, index, t, lefts[j], rights[j]);
+            continue;
+        }
+        Task& left = lefts[j];
+        Task& right = rights[j];
+        left.box = s.left;
+        right.box = s.right;
+        left.cbox = s.cleft;
+        right.cbox = s.cright;
+        left.begin = t.begin;
+        left.end = right.begin = t.begin + s.n_left;
+        right.end = t.end;
+        left.depth = right.depth = t.depth + 1;
+        is_split[j] = 1;
+    }
+}
+
 /// Builds a subtree sequentially into `nodes` (its root at nodes[at]), allocating sibling
 /// pairs in depth-first order.
 void build_subtree(Ref* refs, uint32_t* index, std::vector<Node>& nodes, uint32_t at, const Task& t) {
     Task left, right;
     nodes[at].box = t.box.box();
-    if (!split_node(refs, index, t, 1, left, right)) {
+    if (!split_node(refs, index, t, left, right)) {
         nodes[at].index = t.begin;
         nodes[at].count = t.end - t.begin;
         return;
@@ -711,21 +769,35 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     auto index = scratch<uint32_t>(n);  // each ref's bin indices, while its node is split
     std::vector<uint32_t> subtree_top;  // top node of each subtree
     tops.push_back(Top{root});
-    for (std::size_t i = 0; i < tops.size(); ++i) {
-        const Task t = tops[i].task;
-        if (pthreads == 1 || t.end - t.begin < top_min) {
-            tops[i].subtree = static_cast<int32_t>(subtree_top.size());
-            subtree_top.push_back(static_cast<uint32_t>(i));
-            continue;
+    for (std::vector<uint32_t> level{0}; !level.empty();) {
+        std::vector<uint32_t> work, next;
+        std::vector<Task> tasks;
+        for (const uint32_t i : level) {
+            const Task& t = tops[i].task;
+            if (pthreads == 1 || t.end - t.begin < top_min) {
+                tops[i].subtree = static_cast<int32_t>(subtree_top.size());
+                subtree_top.push_back(i);
+            } else {
+                work.push_back(i);
+                tasks.push_back(t);
+            }
         }
-        Task left, right;
-        if (!split_node(refs, index.get(), t, pthreads, left, right)) {
-            tops[i].leaf = true;
-            continue;
+        std::vector<char> is_split(work.size());
+        std::vector<Task> lefts(work.size()), rights(work.size());
+        if (!work.empty()) split_level(refs, index.get(), tasks, pthreads, is_split, lefts, rights);
+        for (std::size_t j = 0; j < work.size(); ++j) {
+            if (!is_split[j]) {
+                tops[work[j]].leaf = true;
+                continue;
+            }
+            const auto left = static_cast<uint32_t>(tops.size());
+            tops[work[j]].left = static_cast<int32_t>(left);
+            tops.push_back(Top{lefts[j]});
+            tops.push_back(Top{rights[j]});
+            next.push_back(left);
+            next.push_back(left + 1);
         }
-        tops[i].left = static_cast<int32_t>(tops.size());
-        tops.push_back(Top{left});
-        tops.push_back(Top{right});
+        level = std::move(next);
     }
 
     // The subtrees, largest first, each on whichever thread is free.
