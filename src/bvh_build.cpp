@@ -1,13 +1,15 @@
 // Binned SAH builder (Wald 2007, "On fast construction of SAH-based bounding volume
-// hierarchies"). The passes per node are kept to two (binning, partition): the node's box
-// and its centroids' box come from the parent (the union of the parent's bins on each side
-// of the plane, and bounds accumulated while partitioning). With several threads the top
-// nodes are binned and partitioned by all threads together (each bins a slice, the bins are
-// merged; each partitions a slice, misplaced blocks are swapped), then the subtrees below
-// are built by whichever thread is free, each into its own node array in depth-first
-// order. The arrays are stitched at the end in the order a sequential build allocates
-// nodes, so the tree (and its layout) does not depend on thread timing, and a one-thread
-// build is the sequential builder's tree exactly.
+// hierarchies"): 16 bins on each axis, the cheapest plane or a leaf. Two passes per node:
+// the binning, which also gives the children's boxes and centroid boxes (each bin keeps
+// both), and the partition, which reads each triangle's bin from the binning. Triangle
+// boxes are computed once, in float relative to the anchor and rounded outward.
+// With several threads, the top nodes are split a level at a time by all threads (slices
+// binned and partitioned in parallel), then the subtrees below are built by whichever
+// thread is free, each into its own node array in depth-first order. The arrays are
+// stitched in the order a sequential build allocates nodes, so the tree and its layout do
+// not depend on thread timing nor on the thread count (the order of triangles within a
+// leaf may), and they are those of the previous, sequential builder (kept at the end of
+// this file for targets without AVX2) but for ties in median splits, now broken by id.
 #include <algorithm>
 #include <array>
 #include <atomic>
