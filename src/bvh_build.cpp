@@ -18,7 +18,9 @@
 #include <cstring>
 #include <memory>
 #include <new>
+#include <system_error>
 #include <thread>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -414,18 +416,42 @@ std::unique_ptr<T[]> scratch(std::size_t n) {
     return p;
 }
 
-/// Runs f(0) .. f(n - 1), f(0) on the calling thread.
+/// Runs job(0) .. job(n_jobs - 1) on up to `threads` threads (the calling one included),
+/// each taking the next job not taken. The helpers are detached, and the caller waits only
+/// for the jobs they took: on a busy machine, a helper that is not scheduled soon costs
+/// nothing (the caller does its share), where a join would wait for it.
 template <class F>
-void run_parallel(unsigned n, F&& f) {
-    if (n <= 1) {
-        f(0u);
+void run_jobs(unsigned threads, std::size_t n_jobs, F&& job) {
+    if (threads <= 1 || n_jobs <= 1) {
+        for (std::size_t k = 0; k < n_jobs; ++k) job(k);
         return;
     }
-    std::vector<std::thread> helpers;
-    helpers.reserve(n - 1);
-    for (unsigned t = 1; t < n; ++t) helpers.emplace_back([&f, t] { f(t); });
-    f(0u);
-    for (auto& h : helpers) h.join();
+    struct State {
+        std::atomic<std::size_t> next{0}, done{0};
+        std::size_t n = 0;
+        void* job = nullptr;
+        void (*call)(void*, std::size_t) = nullptr;
+        void work() {
+            for (std::size_t k; (k = next.fetch_add(1)) < n;) {
+                call(job, k);
+                done.fetch_add(1, std::memory_order_release);
+            }
+        }
+    };
+    auto state = std::make_shared<State>();  // outlives the call: a late helper only reads `next`
+    state->n = n_jobs;
+    state->job = &job;
+    state->call = [](void* f, std::size_t k) { (*static_cast<std::remove_reference_t<F>*>(f))(k); };
+    const auto helpers = static_cast<unsigned>(std::min<std::size_t>(threads, n_jobs)) - 1;
+    for (unsigned t = 0; t < helpers; ++t) {
+        try {
+            std::thread([state] { state->work(); }).detach();
+        } catch (const std::system_error&) {
+            break;  // no thread: the caller does the jobs
+        }
+    }
+    state->work();
+    while (state->done.load(std::memory_order_acquire) < n_jobs) std::this_thread::yield();
 }
 
 inline uint32_t slice(uint32_t begin, uint32_t end, unsigned t, unsigned n) {
@@ -476,15 +502,6 @@ bool split_node(Ref* refs, uint32_t* index, const Task& t, Task& left, Task& rig
     right.end = t.end;
     left.depth = right.depth = t.depth + 1;
     return true;
-}
-
-/// Runs job(0) .. job(n_jobs - 1) on `threads` threads, each taking the next job free.
-template <class F>
-void run_jobs(unsigned threads, std::size_t n_jobs, F&& job) {
-    std::atomic<std::size_t> next{0};
-    run_parallel(static_cast<unsigned>(std::min<std::size_t>(threads, n_jobs)), [&](unsigned) {
-        for (std::size_t k; (k = next.fetch_add(1)) < n_jobs;) job(k);
-    });
 }
 
 /// Splits the nodes of one level of the top of the tree, all threads on each node: every
@@ -667,13 +684,14 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     const uint32_t n = static_cast<uint32_t>(n_triangles);
     // Fewer threads for small meshes: a thread start costs about as much as ~10^4 triangles.
     const unsigned pthreads = static_cast<unsigned>(std::min<std::size_t>(n_threads, 1 + n_triangles / 16384));
+    const unsigned chunks = pthreads == 1 ? 1 : 8 * pthreads;  // of the passes over triangles or points
 
     // The anchor: the centre of the triangles' bounding box, in double.
-    std::vector<std::array<double, 6>> part_bounds(pthreads);
-    run_parallel(pthreads, [&](unsigned t) {
+    std::vector<std::array<double, 6>> part_bounds(chunks);
+    run_jobs(pthreads, chunks, [&](std::size_t t) {
         double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-        const std::size_t e = 3 * std::size_t(slice(0, n, t + 1, pthreads));
-        for (std::size_t i = 3 * std::size_t(slice(0, n, t, pthreads)); i < e; ++i) {
+        const std::size_t e = 3 * std::size_t(slice(0, n, t + 1, chunks));
+        for (std::size_t i = 3 * std::size_t(slice(0, n, t, chunks)); i < e; ++i) {
             const double* p = points + 3 * std::size_t(triangles[i]);
             for (int k = 0; k < 3; ++k) {
                 lo[k] = std::min(lo[k], p[k]);
@@ -700,9 +718,9 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     // Also each point's squared distance to the sphere's centre (the anchor).
     auto pbox = scratch<PointBox>(n_points);
     auto pdist = scratch<double>(n_points);
-    run_parallel(pthreads, [&](unsigned t) {
+    run_jobs(pthreads, chunks, [&](std::size_t t) {
         const auto np = static_cast<uint32_t>(n_points);
-        for (uint32_t i = slice(0, np, t, pthreads), e = slice(0, np, t + 1, pthreads); i < e; ++i) {
+        for (uint32_t i = slice(0, np, t, chunks), e = slice(0, np, t + 1, chunks); i < e; ++i) {
             const double* p = points + 3 * std::size_t(i);
             double d2 = 0;
             for (int k = 0; k < 3; ++k) {
@@ -722,12 +740,12 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     if (refs == nullptr) throw std::bad_alloc();
     advise_huge(refs, refs_bytes);
     std::unique_ptr<Ref, void (*)(void*)> refs_owner(refs, std::free);
-    std::vector<Task> part_root(pthreads);
-    std::vector<double> part_r2(pthreads, 0.0);
-    run_parallel(pthreads, [&](unsigned t) {
+    std::vector<Task> part_root(chunks);
+    std::vector<double> part_r2(chunks, 0.0);
+    run_jobs(pthreads, chunks, [&](std::size_t t) {
         VBox box, cbox;
         double r2 = 0;
-        for (uint32_t i = slice(0, n, t, pthreads), e = slice(0, n, t + 1, pthreads); i < e; ++i) {
+        for (uint32_t i = slice(0, n, t, chunks), e = slice(0, n, t + 1, chunks); i < e; ++i) {
             const uint32_t* tri = triangles + 3 * std::size_t(i);
             __m128 lo = _mm_loadu_ps(pbox[tri[0]].lo), hi = _mm_loadu_ps(pbox[tri[0]].hi);
             for (int c = 1; c < 3; ++c) {
@@ -749,7 +767,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     });
     Task root{0, n, VBox{}, VBox{}, 0};
     double r2 = 0;
-    for (unsigned t = 0; t < pthreads; ++t) {
+    for (unsigned t = 0; t < chunks; ++t) {
         root.box.grow(part_root[t].box);
         root.cbox.grow(part_root[t].cbox);
         r2 = std::max(r2, part_r2[t]);
@@ -810,15 +828,12 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         return ta.end - ta.begin > tb.end - tb.begin;
     });
     std::vector<std::vector<Node>> subtrees(subtree_top.size());
-    std::atomic<std::size_t> next_subtree{0};
-    run_parallel(std::min<std::size_t>(pthreads, subtree_top.size()), [&](unsigned) {
-        for (std::size_t j; (j = next_subtree.fetch_add(1)) < order.size();) {
-            const Task& t = tops[subtree_top[order[j]]].task;
-            std::vector<Node>& nodes = subtrees[order[j]];
-            reserve_huge(nodes, 2 * std::size_t(t.end - t.begin) - 1);
-            nodes.emplace_back();
-            build_subtree(refs, index.get(), nodes, 0, t);
-        }
+    run_jobs(pthreads, order.size(), [&](std::size_t j) {
+        const Task& t = tops[subtree_top[order[j]]].task;
+        std::vector<Node>& nodes = subtrees[order[j]];
+        reserve_huge(nodes, 2 * std::size_t(t.end - t.begin) - 1);
+        nodes.emplace_back();
+        build_subtree(refs, index.get(), nodes, 0, t);
     });
 
     // Final layout: the order in which a sequential build allocates nodes (sibling pairs,
@@ -858,18 +873,15 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         stack.emplace_back(static_cast<uint32_t>(top.left + 1), node.index + 1);
         stack.emplace_back(static_cast<uint32_t>(top.left), node.index);
     }
-    std::atomic<std::size_t> next_copy{0};
-    run_parallel(std::min<std::size_t>(pthreads, subtrees.size()), [&](unsigned) {
-        for (std::size_t j; (j = next_copy.fetch_add(1)) < order.size();) {
-            const std::vector<Node>& local = subtrees[order[j]];
-            const auto [pos, base] = placed[order[j]];
-            for (std::size_t i = 0; i < local.size(); ++i) {
-                Node node = local[i];
-                if (!node.is_leaf()) node.index = base + node.index - 1;
-                scene.nodes[i == 0 ? pos : base + i - 1] = node;
-            }
-            std::vector<Node>().swap(subtrees[order[j]]);
+    run_jobs(pthreads, order.size(), [&](std::size_t j) {
+        const std::vector<Node>& local = subtrees[order[j]];
+        const auto [pos, base] = placed[order[j]];
+        for (std::size_t i = 0; i < local.size(); ++i) {
+            Node node = local[i];
+            if (!node.is_leaf()) node.index = base + node.index - 1;
+            scene.nodes[i == 0 ? pos : base + i - 1] = node;
         }
+        std::vector<Node>().swap(subtrees[order[j]]);
     });
     }
     scene.bounds = scene.nodes[0].box;
@@ -878,8 +890,8 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     reserve_huge(scene.triangles, 3 * n_triangles);
     scene.prim_ids.resize(n_triangles);
     scene.triangles.resize(3 * n_triangles);
-    run_parallel(pthreads, [&](unsigned t) {
-        for (uint32_t i = slice(0, n, t, pthreads), e = slice(0, n, t + 1, pthreads); i < e; ++i) {
+    run_jobs(pthreads, chunks, [&](std::size_t t) {
+        for (uint32_t i = slice(0, n, t, chunks), e = slice(0, n, t + 1, chunks); i < e; ++i) {
             const uint32_t id = refs[i].id;
             scene.prim_ids[i] = id;
             for (int c = 0; c < 3; ++c) scene.triangles[3 * std::size_t(i) + c] = triangles[3 * std::size_t(id) + c];
