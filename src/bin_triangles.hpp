@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdint>
+#include <memory>
 #include <thread>
 #include <vector>
 
@@ -27,12 +29,23 @@ class TriangleBins {
     TriangleBins(const Scene& scene, const CameraRays& rays, const ProjectedPoints& projected, unsigned workers)
         : scene_(scene), rays_(rays), projected_(projected), workers_(workers), n_tiles_(rays.n_tiles()),
           tiles_x_((rays.spec().nx + CameraRays::kTile - 1) / CameraRays::kTile),
-          counts_(std::size_t(workers) * n_tiles_, 0), unknown_(workers) {}
+          counts_(std::size_t(workers) * n_tiles_, 0), rects_(new Slot[scene.n_triangles()]), unknown_(workers) {}
 
-    /// First pass, by worker w: counts its share of the triangles per tile.
+    /// First pass, by worker w: the pixel rectangles of its share of the triangles, and
+    /// their count per tile.
     void count(unsigned w) {
         uint32_t* counts = counts_.data() + std::size_t(w) * n_tiles_;
-        for_each(w, [&](uint32_t, const PixelRect&, int64_t, int64_t, std::size_t tile) { ++counts[tile]; });
+        const CameraSpec& c = rays_.spec();
+        unknown_[w].clear();
+        for (std::size_t i = share(w), end = share(w + 1); i < end; ++i) {
+            PixelRect r;
+            const auto reach = projected_.rect(scene_.triangles.data() + 3 * i, 0, 0, c.nx, c.ny, c.near, c.far, r);
+            if (reach == ProjectedPoints::Reach::unknown) unknown_[w].push_back(uint32_t(i));
+            Slot& slot = rects_[i];
+            slot = {float(r.near - 0x1p-22 * std::fabs(r.near)), int32_t(r.c0), int32_t(r.c1), int32_t(r.r0), int32_t(r.r1)};
+            if (reach != ProjectedPoints::Reach::rect) slot.c0 = 1, slot.c1 = 0;  // binned nowhere
+            for_each_tile(slot, [&](int64_t, int64_t, std::size_t tile) { ++counts[tile]; });
+        }
     }
 
     /// Second pass, by worker w once every worker counted: places its triangles.
@@ -45,7 +58,7 @@ class TriangleBins {
                 for (unsigned v = 0; v < workers_; ++v) total += counts_[std::size_t(v) * n_tiles_ + t];
             }
             offsets_[n_tiles_] = total;
-            list_.resize(total);
+            list_.reset(new Entry[total]);
             ready_.store(true);
         }
         while (!ready_.load()) std::this_thread::yield();
@@ -54,19 +67,19 @@ class TriangleBins {
             next[t] = offsets_[t];
             for (unsigned v = 0; v < w; ++v) next[t] += counts_[std::size_t(v) * n_tiles_ + t];
         }
-        unknown_[w].clear();
-        const int64_t k = CameraRays::kTile;
-        for_each(
-            w,
-            [&](uint32_t i, const PixelRect& r, int64_t tx, int64_t ty, std::size_t tile) {
-                const auto local = [&](int64_t v, int64_t origin) { return uint8_t(std::min(std::max(v - origin, int64_t(0)), k - 1)); };
-                list_[next[tile]++] = {r.near, i, local(r.c0, tx * k), local(r.c1, tx * k), local(r.r0, ty * k), local(r.r1, ty * k)};
-            },
-            &unknown_[w]);
+        constexpr int64_t k = CameraRays::kTile;
+        const auto local = [](int64_t v, int64_t origin) { return uint8_t(std::min(std::max(v - origin, int64_t(0)), k - 1)); };
+        for (std::size_t i = share(w), end = share(w + 1); i < end; ++i) {
+            const Slot& r = rects_[i];
+            for_each_tile(r, [&](int64_t tx, int64_t ty, std::size_t tile) {
+                list_[next[tile]++] = {double(r.near), uint32_t(i), local(r.c0, tx * k), local(r.c1, tx * k),
+                                       local(r.r0, ty * k), local(r.r1, ty * k)};
+            });
+        }
     }
 
-    [[nodiscard]] const Entry* begin(std::size_t tile) const { return list_.data() + offsets_[tile]; }
-    [[nodiscard]] const Entry* end(std::size_t tile) const { return list_.data() + offsets_[tile + 1]; }
+    [[nodiscard]] const Entry* begin(std::size_t tile) const { return list_.get() + offsets_[tile]; }
+    [[nodiscard]] const Entry* end(std::size_t tile) const { return list_.get() + offsets_[tile + 1]; }
     /// Triangles with no usable projection (crossing a pinhole's eye plane), in input order.
     [[nodiscard]] std::vector<uint32_t> unknown() const {
         std::vector<uint32_t> all;
@@ -75,21 +88,23 @@ class TriangleBins {
     }
 
    private:
-    /// Calls f(i, pixel rectangle, tile column, tile row, tile) for each tile worker w's
-    /// triangles reach; those with no usable projection go to `unknown` instead.
+    /// A triangle's pixel rectangle in the image (empty when binned nowhere) and a lower
+    /// bound on its depth.
+    struct Slot {
+        float near;
+        int32_t c0, c1, r0, r1;
+    };
+
+    /// First triangle of worker w's share.
+    [[nodiscard]] std::size_t share(unsigned w) const { return scene_.n_triangles() * w / workers_; }
+
+    /// Calls f(tile column, tile row, tile) for each tile the rectangle touches.
     template <class F>
-    void for_each(unsigned w, F&& f, std::vector<uint32_t>* unknown = nullptr) const {
-        const std::size_t n = scene_.n_triangles(), begin = n * w / workers_, end = n * (w + 1) / workers_;
-        const CameraSpec& c = rays_.spec();
-        for (std::size_t i = begin; i < end; ++i) {
-            PixelRect r;
-            const auto reach = projected_.rect(scene_.triangles.data() + 3 * i, 0, 0, c.nx, c.ny, c.near, c.far, r);
-            if (reach == ProjectedPoints::Reach::unknown && unknown) unknown->push_back(uint32_t(i));
-            if (reach != ProjectedPoints::Reach::rect) continue;
-            for (int64_t ty = r.r0 / CameraRays::kTile; ty <= r.r1 / CameraRays::kTile; ++ty)
-                for (int64_t tx = r.c0 / CameraRays::kTile; tx <= r.c1 / CameraRays::kTile; ++tx)
-                    f(uint32_t(i), r, tx, ty, std::size_t(tx + ty * tiles_x_));
-        }
+    void for_each_tile(const Slot& r, F&& f) const {
+        if (r.c0 > r.c1) return;
+        for (int64_t ty = r.r0 / CameraRays::kTile; ty <= r.r1 / CameraRays::kTile; ++ty)
+            for (int64_t tx = r.c0 / CameraRays::kTile; tx <= r.c1 / CameraRays::kTile; ++tx)
+                f(tx, ty, std::size_t(tx + ty * tiles_x_));
     }
 
     const Scene& scene_;
@@ -100,7 +115,8 @@ class TriangleBins {
     int64_t tiles_x_;
     std::vector<uint32_t> counts_;  // (worker, tile)
     std::vector<std::size_t> offsets_;
-    std::vector<Entry> list_;
+    std::unique_ptr<Slot[]> rects_;
+    std::unique_ptr<Entry[]> list_;
     std::vector<std::vector<uint32_t>> unknown_;  // per worker
     std::atomic<bool> ready_{false};
 };

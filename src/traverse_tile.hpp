@@ -88,8 +88,7 @@ class TileTracer {
         const CameraRays::TilePixels p = rays_.tile_pixels(tile);
         start(p);
         if (rays_.tile_may_hit(tile)) {
-            for (const TriangleBins::Entry* e = begin; e != end; ++e)
-                test_pixels(e->triangle, {e->c0, e->c1, e->r0, e->r1, e->near});
+            for (const TriangleBins::Entry* e = begin; e != end; ++e) test_pixels(e->triangle, {e->c0, e->c1, e->r0, e->r1, e->near});
             if (!unknown.empty()) set_sides(p);
             for (uint32_t i : unknown)
                 if (!separated(i)) test_pixels(i, {0, width_ - 1, 0, height_ - 1});

@@ -61,6 +61,8 @@ def _triangles_of_polys(poly: vtkPolyData, first_id: int) -> tuple[np.ndarray, n
     vtkTriangleFilter (ear cutting handles concave ones), fewer than 3 points dropped."""
     offsets, conn = _cells(poly.GetPolys())
     sizes = np.diff(offsets)
+    if conn.size == 3 * sizes.size and (sizes == 3).all():  # all triangles: the connectivity as is
+        return conn.reshape(-1, 3), np.arange(first_id, first_id + sizes.size)
     tri_cells = np.flatnonzero(sizes == 3)
     tris = conn[offsets[tri_cells][:, None] + np.arange(3)]
     ids = tri_cells
