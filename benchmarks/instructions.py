@@ -2,12 +2,14 @@
 """Instructions per ray, counted by valgrind's callgrind: unlike timings, the count repeats
 exactly on a shared, noisy machine, so it measures small changes to the core.
 
-    python benchmarks/instructions.py [--pixels 512] [--arrays TriangleId]
+    python benchmarks/instructions.py [--pixels 1024] [--arrays TriangleId] [--scene bvh|flat]
 
 The frog contour (1.5 M triangles) is written once to a temporary file; a child process
 under callgrind loads it, builds the scene (not counted; ``--scene flat`` builds no BVH, as
-``vrc.cast`` does) and casts once from the iso camera of benchmarks/peers.py on one thread, counting only the cast's worker (functions whose name
-contains ``render``; the core keeps its symbols for this). Prints instructions per ray.
+``vrc.cast`` does) and casts once from the iso camera of benchmarks/peers.py on one thread.
+Only the cast's worker threads are counted (they run ``vrc::render``; the core keeps its
+symbols for this), which includes the per-camera projection and binning. Prints
+instructions per ray.
 """
 
 from __future__ import annotations
@@ -33,11 +35,19 @@ scene.cast(camera, arrays=sys.argv[3].split(","), threads=1)
 
 def count(mesh_file: Path, pixels: int, arrays: str, scene: str, workdir: Path) -> int:
     out = workdir / "callgrind.out"
-    run = subprocess.run(
-        ["valgrind", "--tool=callgrind", "--collect-atstart=no", "--toggle-collect=std::thread::_State_impl*vrc::render*",
-         f"--callgrind-out-file={out}", sys.executable, "-c", CHILD, str(mesh_file), str(pixels), arrays, scene],
-        capture_output=True, text=True, cwd=workdir,  # not the checkout: the installed package
-    )
+    command = [
+        "valgrind",
+        "--tool=callgrind",
+        "--collect-atstart=no",
+        "--toggle-collect=std::thread::_State_impl*vrc::render*",  # the cast's worker threads
+        f"--callgrind-out-file={out}",
+        sys.executable,
+        "-c",
+        CHILD,
+        *(str(mesh_file), str(pixels), arrays, scene),
+    ]
+    # run from the temporary directory, not the checkout: the installed package is measured
+    run = subprocess.run(command, capture_output=True, text=True, cwd=workdir)
     if run.returncode != 0:
         sys.exit(run.stderr[-3000:])
     totals = re.search(r"^(?:summary|totals): (\d+)", out.read_text(), re.MULTILINE)
@@ -46,10 +56,14 @@ def count(mesh_file: Path, pixels: int, arrays: str, scene: str, workdir: Path) 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--pixels", type=int, default=512)
+    parser.add_argument("--pixels", type=int, default=1024)
     parser.add_argument("--arrays", default="TriangleId", help="comma-separated output arrays")
-    parser.add_argument("--scene", choices=["bvh", "flat"], default="bvh",
-                        help="cast through the BVH (Scene) or bin to tiles without one (vrc.cast)")
+    parser.add_argument(
+        "--scene",
+        choices=["bvh", "flat"],
+        default="bvh",
+        help="cast through the BVH (Scene) or bin to tiles without one (vrc.cast)",
+    )
     args = parser.parse_args()
     from pyvista import examples
 
@@ -59,8 +73,10 @@ def main() -> None:
         examples.load_frog_tissues().contour_labels().save(mesh_file)
         instructions = count(mesh_file, args.pixels, args.arrays, args.scene, workdir)
     rays = args.pixels**2
-    print(f"frog contour, {args.scene} scene, {args.pixels}x{args.pixels}, {args.arrays}: {instructions} instructions, "
-          f"{instructions / rays:.0f} per ray")
+    print(
+        f"frog contour, {args.scene} scene, {args.pixels}x{args.pixels}, {args.arrays}: {instructions} instructions, "
+        f"{instructions / rays:.0f} per ray"
+    )
 
 
 if __name__ == "__main__":

@@ -254,7 +254,7 @@ class Scene:
         (``(n, 3)`` weights of the triangle's points, NaN on a miss).
         """
         if not self.has_bvh and _accel(accel) != "none":
-            raise ValueError('this scene was built with bvh=False: intersect needs accel="none", or build with bvh=True')
+            raise ValueError('this scene was built with bvh=False: intersect needs accel="none" (or bvh=True)')
         o, d = _rays(origins, "origins"), _rays(directions, "directions")
         if o.shape[0] != d.shape[0]:
             raise ValueError(f"origins and directions differ in length: {o.shape[0]} and {d.shape[0]}")
