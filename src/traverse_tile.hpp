@@ -73,10 +73,10 @@ class TileTracer {
     template <class Store>
     void trace(std::size_t tile, Store&& store) {
         const CameraRays::TilePixels t = rays_.tile_pixels(tile);
-        const bool may_hit = rays_.tile_may_hit(tile) && !scene_.nodes.empty();
+        uint32_t entry = rays_.tile_may_hit(tile) && !scene_.nodes.empty() ? entry_node(t) : kNoNode;
         for (int64_t r = t.r0; r <= t.r1; r += kPacket)
             for (int64_t i = t.i0; i <= t.i1; i += kPacket)
-                trace({i, std::min(i + kPacket - 1, t.i1), r, std::min(r + kPacket - 1, t.r1)}, may_hit, store);
+                trace({i, std::min(i + kPacket - 1, t.i1), r, std::min(r + kPacket - 1, t.r1)}, entry, store);
     }
 
     /// A flat scene's tile (no BVH): its binned triangles (`begin` to `end`, see
@@ -98,10 +98,30 @@ class TileTracer {
 
    private:
     template <class Store>
-    void trace(const CameraRays::TilePixels& p, bool may_hit, Store& store) {
+    void trace(const CameraRays::TilePixels& p, uint32_t entry, Store& store) {
         start(p);
-        if (may_hit) traverse(p);
+        if (entry != kNoNode) traverse(p, entry);
         finish(store);
+    }
+
+    static constexpr uint32_t kNoNode = UINT32_MAX;
+
+    /// The tile's entry point (Reshetov et al. 2005): the deepest node whose subtree holds
+    /// every node the tile's frustum meets, so its packets skip the levels above; kNoNode
+    /// when the frustum meets none.
+    uint32_t entry_node(const CameraRays::TilePixels& t) {
+        set_sides(t);
+        far_ = HUGE_VAL;
+        double near;
+        if (!visible(scene_.nodes[0].box, near)) return kNoNode;
+        uint32_t current = 0;
+        while (!scene_.nodes[current].is_leaf()) {
+            const uint32_t left = scene_.nodes[current].index;
+            const bool vl = visible(scene_.nodes[left].box, near), vr = visible(scene_.nodes[left + 1].box, near);
+            if (vl == vr) return vl ? current : kNoNode;
+            current = vl ? left : left + 1;
+        }
+        return current;
     }
 
     /// Empties the rays of the block p; they are made when first tested (most blocks of a
@@ -203,7 +223,7 @@ class TileTracer {
         return all_out[0] | all_out[1] | all_out[2] | all_out[3];
     }
 
-    void traverse(const CameraRays::TilePixels& p) {
+    void traverse(const CameraRays::TilePixels& p, uint32_t entry) {
         set_sides(p);
         update_far();
         struct Pending {
@@ -212,8 +232,8 @@ class TileTracer {
         } stack[128];
         int top = 0;
         double near;
-        if (!visible(scene_.nodes[0].box, near)) return;
-        uint32_t current = 0;
+        if (!visible(scene_.nodes[entry].box, near)) return;
+        uint32_t current = entry;
         for (;;) {
             const Node& node = scene_.nodes[current];
             if (node.is_leaf()) {
