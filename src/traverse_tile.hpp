@@ -15,6 +15,9 @@
 #include <limits>
 #include <optional>
 #include <vector>
+#if defined(__AVX__)
+#include <immintrin.h>
+#endif
 
 #include "camera_rays.hpp"
 #include "bin_triangles.hpp"
@@ -27,6 +30,15 @@ namespace vrc {
 /// the tile's four side planes evaluated at once.
 using Double4 = double __attribute__((vector_size(32)));
 using Mask4 = int64_t __attribute__((vector_size(32)));
+
+/// Whether any lane of a comparison holds.
+inline bool any(Mask4 m) {
+#if defined(__AVX__)
+    return _mm256_movemask_pd(_mm256_castsi256_pd(__m256i(m))) != 0;
+#else
+    return (m[0] | m[1] | m[2] | m[3]) != 0;
+#endif
+}
 
 template <template <class> class KernelT, class Real>
 class TileTracer {
@@ -178,11 +190,10 @@ class TileTracer {
     [[nodiscard]] bool visible(const Box& box, double& near) const {
         Double4 value = side_c_;
         for (int k = 0; k < 3; ++k) {
-            const Double4 lo = Double4{} + double(box.lo[k]), hi = Double4{} + double(box.hi[k]);
-            value += side_a_[k] * (side_hi_[k] ? hi : lo);  // each plane's farthest corner
+            const double l = box.lo[k], h = box.hi[k];
+            value += side_a_[k] * (side_hi_[k] ? Double4{h, h, h, h} : Double4{l, l, l, l});  // farthest corners
         }
-        const Mask4 out = value < side_floor_;
-        if (out[0] | out[1] | out[2] | out[3]) return false;
+        if (any(value < side_floor_)) return false;
         near = depth_.c + depth_.min_over(box) - depth_.slack;
         return near <= far_;
     }
@@ -220,7 +231,7 @@ class TileTracer {
                 value += side_a_[k] * (p[k] - scene_.anchor[k]);
             all_out &= value < side_floor_;
         }
-        return all_out[0] | all_out[1] | all_out[2] | all_out[3];
+        return any(all_out);
     }
 
     void traverse(const CameraRays::TilePixels& p, uint32_t entry) {
