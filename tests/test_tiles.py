@@ -79,11 +79,16 @@ def test_strategies_precisions_and_culling():
                 assert assert_same_as_ray_by_ray(scene, cam, **options) > 300
 
 
-def test_eye_inside_a_closed_mesh():
-    # Triangles all around the eye, some reaching behind its plane (no usable projection).
-    cam = vrc.Camera((0.3, 0.2, 0.1), (1, 2, 3), (0, 0, 1), view_angle=120, nx=50, ny=30)
+@pytest.mark.parametrize("offset", [0.0, 1e5])
+def test_eye_inside_a_closed_mesh(offset):
+    # Triangles all around the eye, some reaching behind its plane (no usable projection),
+    # vertices exactly on pixel rays (the stability benchmark's star scenes).
+    eye = np.full(3, offset) + [0.3, 0.2, 0.1]
+    cam = vrc.Camera(eye, eye + [1, 2, 3], (0, 0, 1), view_angle=120, nx=50, ny=30)
     scene = vrc.Scene(star_mesh(cam, step=3))
     assert assert_same_as_ray_by_ray(scene, cam) == 50 * 30
+    cam = vrc.Camera(eye, eye + [0, 0, -1], (0, 1, 0), w=33 / 16, h=25 / 16, nx=33, ny=25)
+    assert assert_same_as_ray_by_ray(vrc.Scene(star_mesh(cam)), cam) == 33 * 25
 
 
 def test_rays_through_vertices_and_edges():

@@ -66,7 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     camera = Camera.framing(mesh.bounds, view=args.view, nx=nx, ny=ny)
     arrays = ["TriangleId", "CellId", "Barycentric", "Depth", "Normal", "vtkValidPointMask"]
     cast_start = time.perf_counter()
-    scene = Scene(mesh, threads=args.threads)
+    scene = Scene(mesh, threads=args.threads, bvh=False)  # one camera: no BVH needed
     camera, buffers = scene.buffers(camera, arrays=arrays, strategy=args.strategy, threads=args.threads)
     elapsed = time.perf_counter() - cast_start
     pv.wrap(fill_image(vtkImageData(), camera, buffers)).save(args.output)
@@ -75,6 +75,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     hits = int(np.count_nonzero(buffers["vtkValidPointMask"]))
     print(
         f"{scene.n_triangles} triangles, {nx * ny} pixels ({nx}x{ny}), {hits} hits, "
-        f"{elapsed:.3f} s build+cast ({time.perf_counter() - start:.3f} s total) -> {args.output}, {args.png}"
+        f"{elapsed:.3f} s prepare+cast ({time.perf_counter() - start:.3f} s total) -> {args.output}, {args.png}"
     )
     return 0
