@@ -148,9 +148,10 @@ def main() -> None:
     ]
     for name, threads, b, f, c, ratio, agree, mem, grown in rows:
         mem_text = "-" if np.isnan(mem) else f"{mem:.1f}"
+        grown_text = "-" if np.isnan(grown) else f"{grown:.0f}"
         lines.append(
             f"| {name} | {threads} | {b:.3f} | {f:.3f} | {c:.4f} | {rays / c / 1e6:.2f} | {1 / ratio:.2f}x "
-            f"| {agree:.4%} | {mem_text} | {grown:.0f} |"
+            f"| {agree:.4%} | {mem_text} | {grown_text} |"
         )
     by_name = {row[0]: row for row in rows}
     open3d = by_name.get("open3d RaycastingScene f32")
