@@ -86,7 +86,13 @@ class TileTracer {
     template <class Store>
     void trace(std::size_t tile, Store&& store) {
         const CameraRays::TilePixels t = rays_.tile_pixels(tile);
-        uint32_t entry = rays_.tile_may_hit(tile) && !scene_.nodes.empty() ? entry_node(t) : kNoNode;
+        const uint32_t entry = rays_.tile_may_hit(tile) && !scene_.nodes.empty() ? entry_node(t) : kNoNode;
+        if (entry == kNoNode) {  // nothing in the tile's frustum: misses, no rays made
+            const int64_t nx = int64_t(rays_.spec().nx);
+            for (int64_t r = t.r0; r <= t.r1; ++r)
+                for (int64_t i = t.i0; i <= t.i1; ++i) store(std::size_t(i + r * nx), Ray{}, Hit<Real>{});
+            return;
+        }
         for (int64_t r = t.r0; r <= t.r1; r += kPacket)
             for (int64_t i = t.i0; i <= t.i1; i += kPacket)
                 trace({i, std::min(i + kPacket - 1, t.i1), r, std::min(r + kPacket - 1, t.r1)}, entry, store);
@@ -195,6 +201,9 @@ class TileTracer {
             value += side_a_[k] * (side_hi_[k] ? Double4{h, h, h, h} : Double4{l, l, l, l});  // farthest corners
         }
         if (any(value < side_floor_)) return false;
+        // The side planes pass through a pinhole's eye, so they also admit the mirror image
+        // of the frustum behind it: a box wholly nearer than the near plane is culled here.
+        if (depth_.c + depth_.max_over(box) + depth_.slack + projected_.depth_slack() < rays_.spec().near) return false;
         near = depth_.c + depth_.min_over(box) - depth_.slack;
         return near <= far_;
     }
