@@ -50,18 +50,6 @@ class TileTracer {
     /// for a box corner rel (boxes are stored relative to the scene's anchor).
     struct Plane {
         double a[3], c, slack;
-        /// Largest a.rel over the box.
-        [[nodiscard]] double max_over(const Box& box) const {
-            double s = 0;
-            for (int k = 0; k < 3; ++k) s += a[k] * double(a[k] >= 0 ? box.hi[k] : box.lo[k]);
-            return s;
-        }
-        /// Smallest a.rel over the box.
-        [[nodiscard]] double min_over(const Box& box) const {
-            double s = 0;
-            for (int k = 0; k < 3; ++k) s += a[k] * double(a[k] >= 0 ? box.lo[k] : box.hi[k]);
-            return s;
-        }
     };
 
    public:
@@ -74,6 +62,11 @@ class TileTracer {
         bound_.resize(n);
         scale_.resize(n);
         depth_ = plane(map_.depth, 0);
+        // lane 0: the depth at a box's farthest corner; lane 1: minus the depth at its nearest
+        for (int k = 0; k < 3; ++k) {
+            depth_a_[k] = Double4{depth_.a[k], -depth_.a[k], 0, 0};
+            depth_hi_[k] = Mask4{depth_.a[k] >= 0 ? -1 : 0, depth_.a[k] >= 0 ? 0 : -1, 0, 0};
+        }
     }
 
     /// Rays go through the BVH in square packets of kPacket x kPacket pixels: small enough
@@ -201,10 +194,15 @@ class TileTracer {
             value += side_a_[k] * (side_hi_[k] ? Double4{h, h, h, h} : Double4{l, l, l, l});  // farthest corners
         }
         if (any(value < side_floor_)) return false;
+        Double4 depth = Double4{depth_.c, -depth_.c, 0, 0};
+        for (int k = 0; k < 3; ++k) {
+            const double l = box.lo[k], h = box.hi[k];
+            depth += depth_a_[k] * (depth_hi_[k] ? Double4{h, h, h, h} : Double4{l, l, l, l});
+        }
         // The side planes pass through a pinhole's eye, so they also admit the mirror image
         // of the frustum behind it: a box wholly nearer than the near plane is culled here.
-        if (depth_.c + depth_.max_over(box) + depth_.slack + projected_.depth_slack() < rays_.spec().near) return false;
-        near = depth_.c + depth_.min_over(box) - depth_.slack;
+        if (depth[0] + depth_.slack + projected_.depth_slack() < rays_.spec().near) return false;
+        near = -depth[1] - depth_.slack;
         return near <= far_;
     }
 
@@ -321,6 +319,8 @@ class TileTracer {
     CastContext context_;
     CameraRays::PixelMap map_;
     Plane depth_;
+    Double4 depth_a_[3];  // the depth plane's farthest and nearest corners, lanes 0 and 1
+    Mask4 depth_hi_[3];
     Double4 side_c_, side_floor_, side_a_[3];  // the side planes, one per lane
     Mask4 side_hi_[3];                         // lanes whose plane takes the box's hi corner on axis k
     double far_ = HUGE_VAL;
