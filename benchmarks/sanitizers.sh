@@ -72,7 +72,7 @@ env -u LD_PRELOAD ldd "$CORE" | grep -E "libasan|libubsan"
 T="$ROOT/tests"
 set +e
 "$PY" -m pytest -p no:cacheprovider --capture=sys -q "$T/test_scene.py" "$T/test_strategies.py" "$T/test_mesh.py" \
-    "$T/test_validate.py" "$T/test_filter.py" "$T/test_reference_libigl.py" "$@" 2>&1 | tee "$WORK/pytest.log"
+    "$T/test_validate.py" "$T/test_filter.py" "$T/test_reference_libigl.py" "$T/test_tiles.py" "$@" 2>&1 | tee "$WORK/pytest.log"
 STATUS=${PIPESTATUS[0]}
 set -e
 
