@@ -1,12 +1,13 @@
-// Coherent camera rays: a tile of pixels traverses the BVH together. Nodes are culled once
-// per tile against the tile's frustum and against the farthest depth its rays still search;
-// a leaf's triangles are projected into the tile and each is tested only on the pixels
-// whose centres its projection can cover. The ray-triangle test itself is the per-ray one
-// (test_triangle), so every result equals the ray-by-ray traversal's; only the work of
-// finding candidates is shared. Frustum and occlusion culling of a ray packet follow
-// Reshetov, Soupikov and Hurley, "Multi-level ray tracing algorithm" (SIGGRAPH 2005), and
-// Wald, Boulos and Shirley, "Ray tracing deformable scenes using dynamic bounding volume
-// hierarchies" (ACM TOG 2007).
+// Coherent camera rays. Through a BVH, each tile finds its entry node, then its 8x8-pixel
+// packets traverse together: nodes are culled once per packet against its frustum and
+// against the farthest depth its rays still search, and a leaf's triangles are tested
+// only on the pixels whose centres their projection can cover. On a flat scene (no BVH)
+// a tile takes the triangles binned to it instead (bin_triangles.hpp). The ray-triangle
+// test itself is the per-ray one (test_triangle), so every result equals the ray-by-ray
+// traversal's; only the work of finding candidates is shared. Frustum and occlusion
+// culling of a ray packet follow Reshetov, Soupikov and Hurley, "Multi-level ray tracing
+// algorithm" (SIGGRAPH 2005), and Wald, Boulos and Shirley, "Ray tracing deformable scenes
+// using dynamic bounding volume hierarchies" (ACM TOG 2007).
 #pragma once
 
 #include <algorithm>
@@ -100,7 +101,8 @@ class TileTracer {
         const CameraRays::TilePixels p = rays_.tile_pixels(tile);
         start(p);
         if (rays_.tile_may_hit(tile)) {
-            for (const TriangleBins::Entry* e = begin; e != end; ++e) test_pixels(e->triangle, {e->c0, e->c1, e->r0, e->r1, e->near});
+            for (const TriangleBins::Entry* e = begin; e != end; ++e)
+                test_pixels(e->triangle, {e->c0, e->c1, e->r0, e->r1, e->near});
             if (!unknown.empty()) set_sides(p);
             for (uint32_t i : unknown)
                 if (!separated(i)) test_pixels(i, {0, width_ - 1, 0, height_ - 1});
@@ -112,7 +114,7 @@ class TileTracer {
     template <class Store>
     void trace(const CameraRays::TilePixels& p, uint32_t entry, Store& store) {
         start(p);
-        if (entry != kNoNode) traverse(p, entry);
+        traverse(p, entry);
         finish(store);
     }
 
