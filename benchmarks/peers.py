@@ -17,6 +17,7 @@ import os
 import platform
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,7 @@ from vtkraycast.testing import camera_rays
 
 sys.path.insert(0, str(Path(__file__).parent))
 from peer_casters import make_peers, more_peers
+from timing import median_seconds
 
 
 def resident() -> int:
@@ -48,13 +50,7 @@ def main() -> None:
     cam = vrc.Camera.framing(mesh.bounds, view="iso", nx=n, ny=n)
     rays = n * n
 
-    def median_of(fn) -> float:
-        times = []
-        for _ in range(args.repeats):
-            start = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - start)
-        return float(np.median(times))
+    median_of = partial(median_seconds, repeats=args.repeats)
 
     before = resident()
     scene = vrc.Scene(mesh)

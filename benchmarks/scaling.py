@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import sys
 import time
 from pathlib import Path
 
@@ -25,14 +26,12 @@ import numpy as np
 import vtkraycast as vrc
 from vtkraycast.testing import bumpy_sphere
 
+sys.path.insert(0, str(Path(__file__).parent))
+from timing import median_seconds
 
-def timed(fn, repeats: int = 3) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
+
+def timed(fn) -> float:
+    return median_seconds(fn, 3)
 
 
 def main() -> None:

@@ -53,6 +53,10 @@ struct Scene {
 [[nodiscard]] Scene build_scene(const double* points, std::size_t n_points, const uint32_t* triangles,
                                 std::size_t n_triangles, unsigned threads);
 
+/// Sets the scene's anchor (the centre of the triangles' bounding box), its bounds relative
+/// to the anchor (rounded outward) and the seed's bounding sphere around it.
+void frame_scene(Scene& scene, const double* points, const uint32_t* triangles, std::size_t n_triangles);
+
 /// The same scene without a hierarchy (triangles in input order): all a single camera cast
 /// needs, as its triangles are binned to the image's tiles instead (bin_triangles.hpp).
 [[nodiscard]] Scene flat_scene(const double* points, std::size_t n_points, const uint32_t* triangles,

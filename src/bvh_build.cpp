@@ -1042,15 +1042,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     scene.points.assign(points, points + 3 * n_points);
     if (n_triangles == 0) return scene;
 
-    // The anchor: the centre of the triangles' bounding box, in double.
-    double lo_all[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi_all[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-    for (std::size_t i = 0; i < 3 * n_triangles; ++i)
-        for (int k = 0; k < 3; ++k) {
-            const double x = points[3 * std::size_t(triangles[i]) + k];
-            lo_all[k] = std::min(lo_all[k], x);
-            hi_all[k] = std::max(hi_all[k], x);
-        }
-    for (int k = 0; k < 3; ++k) scene.anchor[k] = 0.5 * lo_all[k] + 0.5 * hi_all[k];
+    frame_scene(scene, points, triangles, n_triangles);  // anchor, bounds and sphere
 
     std::vector<PrimRef> refs(n_triangles);
     for (std::size_t i = 0; i < n_triangles; ++i) {
@@ -1074,16 +1066,6 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     builder.build(0, 0, static_cast<uint32_t>(n_triangles), 0);
     scene.nodes.resize(builder.next_node.load());
     scene.nodes.shrink_to_fit();
-    scene.bounds = scene.nodes[0].box;
-    double r2 = 0;
-    for (int k = 0; k < 3; ++k) scene.sphere_center[k] = scene.anchor[k];
-    for (std::size_t i = 0; i < 3 * n_triangles; ++i) {
-        const double* p = points + 3 * std::size_t(triangles[i]);
-        double d2 = 0;
-        for (int k = 0; k < 3; ++k) d2 += (p[k] - scene.sphere_center[k]) * (p[k] - scene.sphere_center[k]);
-        r2 = std::max(r2, d2);
-    }
-    scene.sphere_radius = std::sqrt(r2);
 
     scene.prim_ids.resize(n_triangles);
     scene.triangles.resize(3 * n_triangles);

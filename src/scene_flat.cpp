@@ -7,13 +7,7 @@
 
 namespace vrc {
 
-Scene flat_scene(const double* points, std::size_t n_points, const uint32_t* triangles, std::size_t n_triangles) {
-    Scene scene;
-    scene.points.assign(points, points + 3 * n_points);
-    scene.triangles.assign(triangles, triangles + 3 * n_triangles);
-    scene.prim_ids.resize(n_triangles);
-    for (std::size_t i = 0; i < n_triangles; ++i) scene.prim_ids[i] = uint32_t(i);
-    if (n_triangles == 0) return scene;
+void frame_scene(Scene& scene, const double* points, const uint32_t* triangles, std::size_t n_triangles) {
     double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
     for (std::size_t i = 0; i < 3 * n_triangles; ++i)
         for (int k = 0; k < 3; ++k) {
@@ -34,6 +28,15 @@ Scene flat_scene(const double* points, std::size_t n_points, const uint32_t* tri
         r2 = std::max(r2, d2);
     }
     scene.sphere_radius = std::sqrt(r2);
+}
+
+Scene flat_scene(const double* points, std::size_t n_points, const uint32_t* triangles, std::size_t n_triangles) {
+    Scene scene;
+    scene.points.assign(points, points + 3 * n_points);
+    scene.triangles.assign(triangles, triangles + 3 * n_triangles);
+    scene.prim_ids.resize(n_triangles);
+    for (std::size_t i = 0; i < n_triangles; ++i) scene.prim_ids[i] = uint32_t(i);
+    if (n_triangles > 0) frame_scene(scene, points, triangles, n_triangles);
     return scene;
 }
 

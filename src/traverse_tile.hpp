@@ -156,9 +156,12 @@ class TileTracer {
 
     template <class Store>
     void finish(Store& store) {
-        const int64_t nx = int64_t(rays_.spec().nx);
-        for (int64_t j = 0, n = width_ * height_; j < n; ++j)  // ray_ is read on hits only
-            store(std::size_t((i0_ + j % width_) + (r0_ + j / width_) * nx), ray_[j], hit_[j]);
+        for (int64_t j = 0, n = width_ * height_; j < n; ++j) store(pixel(j), ray_[j], hit_[j]);  // ray_ read on hits only
+    }
+
+    /// The image pixel of the block's j-th ray.
+    [[nodiscard]] std::size_t pixel(int64_t j) const {
+        return std::size_t((i0_ + j % width_) + (r0_ + j / width_) * int64_t(rays_.spec().nx));
     }
 
     /// Half-space a.q + b >= 0 of q = P - eye, with its rounding slack over the scene.
@@ -309,7 +312,7 @@ class TileTracer {
     }
 
     void make_ray(int64_t j) {
-        ray_[j] = rays_.ray(std::size_t((i0_ + j % width_) + (r0_ + j / width_) * int64_t(rays_.spec().nx)));
+        ray_[j] = rays_.ray(pixel(j));
         kernel_[j].emplace(ray_[j], context_);
         bound_[j] = ray_[j].tmax;
         scale_[j] = dot(map_.depth, ray_[j].dir);  // depth per unit of t
