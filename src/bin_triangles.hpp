@@ -13,7 +13,7 @@
 
 #include "bvh.hpp"
 #include "camera_rays.hpp"
-#include "projected_points.hpp"
+#include "projected_scene.hpp"
 
 namespace vrc {
 
@@ -26,25 +26,23 @@ class TriangleBins {
         uint8_t c0, c1, r0, r1;  ///< pixel rectangle in the tile's own coordinates
     };
 
-    TriangleBins(const Scene& scene, const CameraRays& rays, const ProjectedPoints& projected, unsigned workers)
+    TriangleBins(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, unsigned workers)
         : scene_(scene), rays_(rays), projected_(projected), workers_(workers), n_tiles_(rays.n_tiles()),
           tiles_x_((rays.spec().nx + CameraRays::kTile - 1) / CameraRays::kTile),
-          counts_(std::size_t(workers) * n_tiles_, 0), rects_(new Slot[scene.n_triangles()]), unknown_(workers) {}
+          counts_(std::size_t(workers) * n_tiles_, 0), rects_(new ImageRect[scene.n_triangles()]), unknown_(workers) {}
 
     /// First pass, by worker w: the pixel rectangles of its share of the triangles, and
     /// their count per tile.
     void count(unsigned w) {
         uint32_t* counts = counts_.data() + std::size_t(w) * n_tiles_;
-        const CameraSpec& c = rays_.spec();
         unknown_[w].clear();
         for (std::size_t i = share(w), end = share(w + 1); i < end; ++i) {
-            PixelRect r;
-            const auto reach = projected_.rect(scene_.triangles.data() + 3 * i, 0, 0, c.nx, c.ny, c.near, c.far, r);
-            if (reach == ProjectedPoints::Reach::unknown) unknown_[w].push_back(uint32_t(i));
-            Slot& slot = rects_[i];
-            slot = {float(r.near - 0x1p-22 * std::fabs(r.near)), int32_t(r.c0), int32_t(r.c1), int32_t(r.r0), int32_t(r.r1)};
-            if (reach != ProjectedPoints::Reach::rect) slot.c0 = 1, slot.c1 = 0;  // binned nowhere
-            for_each_tile(slot, [&](int64_t, int64_t, std::size_t tile) { ++counts[tile]; });
+            ImageRect& rect = rects_[i];
+            if (projected_.frame_triangle(scene_.triangles.data() + 3 * i, rect) == ProjectedScene::Reach::unknown) {
+                unknown_[w].push_back(uint32_t(i));
+                rect = kNoPixels;  // binned nowhere
+            }
+            for_each_tile(rect, [&](int64_t, int64_t, std::size_t tile) { ++counts[tile]; });
         }
     }
 
@@ -70,7 +68,7 @@ class TriangleBins {
         constexpr int64_t k = CameraRays::kTile;
         const auto local = [](int64_t v, int64_t origin) { return uint8_t(std::min(std::max(v - origin, int64_t(0)), k - 1)); };
         for (std::size_t i = share(w), end = share(w + 1); i < end; ++i) {
-            const Slot& r = rects_[i];
+            const ImageRect& r = rects_[i];
             for_each_tile(r, [&](int64_t tx, int64_t ty, std::size_t tile) {
                 list_[next[tile]++] = {double(r.near), uint32_t(i), local(r.c0, tx * k), local(r.c1, tx * k),
                                        local(r.r0, ty * k), local(r.r1, ty * k)};
@@ -88,20 +86,13 @@ class TriangleBins {
     }
 
    private:
-    /// A triangle's pixel rectangle in the image (empty when binned nowhere) and a lower
-    /// bound on its depth.
-    struct Slot {
-        float near;
-        int32_t c0, c1, r0, r1;
-    };
-
     /// First triangle of worker w's share.
     [[nodiscard]] std::size_t share(unsigned w) const { return scene_.n_triangles() * w / workers_; }
 
     /// Calls f(tile column, tile row, tile) for each tile the rectangle touches.
     template <class F>
-    void for_each_tile(const Slot& r, F&& f) const {
-        if (r.c0 > r.c1) return;
+    void for_each_tile(const ImageRect& r, F&& f) const {
+        if (r.empty()) return;
         for (int64_t ty = r.r0 / CameraRays::kTile; ty <= r.r1 / CameraRays::kTile; ++ty)
             for (int64_t tx = r.c0 / CameraRays::kTile; tx <= r.c1 / CameraRays::kTile; ++tx)
                 f(tx, ty, std::size_t(tx + ty * tiles_x_));
@@ -109,13 +100,13 @@ class TriangleBins {
 
     const Scene& scene_;
     const CameraRays& rays_;
-    const ProjectedPoints& projected_;
+    const ProjectedScene& projected_;
     unsigned workers_;
     std::size_t n_tiles_;
     int64_t tiles_x_;
     std::vector<uint32_t> counts_;  // (worker, tile)
     std::vector<std::size_t> offsets_;
-    std::unique_ptr<Slot[]> rects_;
+    std::unique_ptr<ImageRect[]> rects_;  // each triangle's (empty when binned nowhere)
     std::unique_ptr<Entry[]> list_;
     std::vector<std::vector<uint32_t>> unknown_;  // per worker
     std::atomic<bool> ready_{false};

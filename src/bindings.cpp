@@ -149,6 +149,10 @@ void bind_precision(nb::module_& m) {
             spec.nx = nx;
             spec.ny = ny;
             spec.parallel = parallel;
+            if (!scene.has_bvh() && accel != "none" && !vrc::CameraCast::fits(spec))
+                throw std::invalid_argument("a scene built without a BVH casts images of at most " +
+                                            std::to_string(vrc::ImageRect::kMaxPixels) + " x " +
+                                            std::to_string(vrc::ImageRect::kMaxPixels) + " pixels");
             vrc::CameraRays rays(spec);
             rays.restrict_to(scene.bounds, scene.anchor);
             return run<Real>(scene, rays, strategy, accel, backface_culling, triangle_id, depth, barycentric,
@@ -203,6 +207,7 @@ NB_MODULE(_core, m) {
         .def_prop_ro("n_nodes", [](const vrc::Scene& s) { return s.nodes.size(); })
         .def_prop_ro("memory_bytes", &vrc::Scene::memory_bytes,
                      "Bytes held by the BVH, the triangles and the points.");
+    m.attr("max_binned_pixels") = vrc::ImageRect::kMaxPixels;  // widest image a scene without a BVH casts
     bind_precision<double>(m);
     bind_precision<float>(m);
 }

@@ -4,10 +4,12 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "exact_sign.hpp"
 #include "geometry.hpp"
+#include "memory.hpp"
 
 namespace vrc {
 
@@ -24,7 +26,7 @@ static_assert(sizeof(Node) == 32, "nodes are meant to be 32 bytes");
 /// Triangles, in BVH leaf order, and the hierarchy over them. Owns copies of its input so
 /// that a mesh modified after (or during) a cast cannot change a result.
 struct Scene {
-    std::vector<double> points;       ///< (n_points, 3) world coordinates
+    std::vector<double> points;       ///< (n_points, 3) world coordinates, in order of first use
     std::vector<uint32_t> triangles;  ///< (n_triangles, 3) point indices, in leaf order
     std::vector<uint32_t> prim_ids;   ///< leaf-order position -> input triangle index
     std::vector<Node> nodes;          ///< nodes[0] is the root; empty when there are no triangles
@@ -34,15 +36,18 @@ struct Scene {
     Box bounds;                       ///< box of all triangles, relative to `anchor` (rounded outward)
     double sphere_center[3] = {0, 0, 0};  ///< the seed's bounding sphere: box centre...
     double sphere_radius = -1;            ///< ...and largest point distance to it (-1: empty)
+    /// Working memory of camera casts, kept between them (shared: a Scene stays movable).
+    std::shared_ptr<ScratchPool> scratch = std::make_shared<ScratchPool>();
 
     [[nodiscard]] std::size_t n_triangles() const { return prim_ids.size(); }
     /// False for a flat scene (triangles but no hierarchy: one camera cast's worth).
     [[nodiscard]] bool has_bvh() const { return !nodes.empty() || prim_ids.empty(); }
     [[nodiscard]] const double* point(uint32_t i) const { return points.data() + 3 * std::size_t(i); }
-    /// Bytes held by the structure and the per-triangle data (points included).
+    /// Bytes held by the structure and the per-triangle data (points included), and the
+    /// working memory kept from camera casts.
     [[nodiscard]] std::size_t memory_bytes() const {
         return points.size() * sizeof(double) + triangles.size() * sizeof(uint32_t) +
-               prim_ids.size() * sizeof(uint32_t) + nodes.size() * sizeof(Node);
+               prim_ids.size() * sizeof(uint32_t) + nodes.size() * sizeof(Node) + scratch->bytes();
     }
 };
 
@@ -56,6 +61,11 @@ struct Scene {
 /// Sets the scene's anchor (the centre of the triangles' bounding box), its bounds relative
 /// to the anchor (rounded outward) and the seed's bounding sphere around it.
 void frame_scene(Scene& scene, const double* points, const uint32_t* triangles, std::size_t n_triangles);
+
+/// Copies into the scene the points its triangles use, in the order they first use them,
+/// and renumbers the triangles: neighbouring triangles (in leaf order, or a mesh's own order)
+/// then read neighbouring points. Unused points are dropped.
+void order_points(Scene& scene, const double* points, std::size_t n_points);
 
 /// The same scene without a hierarchy (triangles in input order): all a single camera cast
 /// needs, as its triangles are binned to the image's tiles instead (bin_triangles.hpp).

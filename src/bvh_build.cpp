@@ -31,7 +31,6 @@
 // the end of this file: the same tree (one thread: the same layout too), built slower.
 #if defined(__AVX2__) && defined(__BMI__) && defined(__POPCNT__)
 #include <immintrin.h>
-#include <sys/mman.h>
 
 namespace vrc {
 namespace {
@@ -394,20 +393,6 @@ uint32_t median(Ref* refs, const Task& t) {
     return mid;
 }
 
-/// Asks for transparent huge pages over a large buffer (its whole 4 KiB pages): a build
-/// writes ~200 bytes of fresh memory per triangle, and 4 KiB page faults showed in profiles.
-void advise_huge(void* data, std::size_t bytes) {
-    if (bytes < (std::size_t(4) << 20)) return;
-    const auto begin = (reinterpret_cast<std::uintptr_t>(data) + 4095) & ~std::uintptr_t(4095);
-    const auto end = (reinterpret_cast<std::uintptr_t>(data) + bytes) & ~std::uintptr_t(4095);
-    if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
-}
-template <class T>
-void reserve_huge(std::vector<T>& v, std::size_t n) {
-    v.reserve(n);
-    advise_huge(v.data(), n * sizeof(T));
-}
-
 /// An uninitialised buffer (no zero fill: fresh memory showed in profiles), huge pages asked.
 template <class T>
 std::unique_ptr<T[]> scratch(std::size_t n) {
@@ -678,8 +663,6 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
                   unsigned threads) {
     Scene scene;
     const unsigned n_threads = std::max(1u, threads);
-    reserve_huge(scene.points, 3 * n_points);
-    scene.points.assign(points, points + 3 * n_points);
     if (n_triangles == 0) return scene;
     const uint32_t n = static_cast<uint32_t>(n_triangles);
     // Fewer threads for small meshes: a thread start costs about as much as ~10^4 triangles.
@@ -897,6 +880,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
             for (int c = 0; c < 3; ++c) scene.triangles[3 * std::size_t(i) + c] = triangles[3 * std::size_t(id) + c];
         }
     });
+    order_points(scene, points, n_points);
     return scene;
 }
 
@@ -1039,7 +1023,6 @@ struct Builder {
 Scene build_scene(const double* points, std::size_t n_points, const uint32_t* triangles, std::size_t n_triangles,
                   unsigned threads) {
     Scene scene;
-    scene.points.assign(points, points + 3 * n_points);
     if (n_triangles == 0) return scene;
 
     frame_scene(scene, points, triangles, n_triangles);  // anchor, bounds and sphere
@@ -1074,6 +1057,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         scene.prim_ids[i] = id;
         for (int c = 0; c < 3; ++c) scene.triangles[3 * i + c] = triangles[3 * std::size_t(id) + c];
     }
+    order_points(scene, points, n_points);
     return scene;
 }
 

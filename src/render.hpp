@@ -55,24 +55,35 @@ class Barrier {
     std::atomic<unsigned> arrived_{0}, generation_{0};
 };
 
-/// What camera rays share across tiles: the projected points, and on a flat scene (no BVH)
+/// What camera rays share across tiles: the projected scene, and on a flat scene (no BVH)
 /// the triangles binned to tiles. Prepared by all workers together (`prepare`).
 struct CameraCast {
     CameraCast(const Scene& scene, const CameraRays& rays, unsigned workers) : projected(scene, rays), barrier(workers) {
         if (!scene.has_bvh()) bins.emplace(scene, rays, projected, workers);
     }
+    /// Whether camera rays of this size go through tiles: the image rectangles hold 16-bit
+    /// pixel indices. (Larger images through a BVH are traced ray by ray.)
+    static bool fits(const CameraSpec& c) { return c.nx <= ImageRect::kMaxPixels && c.ny <= ImageRect::kMaxPixels; }
+    /// Whether the BVH's nodes fit the projected nodes' 28-bit links (else ray by ray).
+    static bool fits(const Scene& scene) { return scene.nodes.size() < ProjectedNode::kMaxNodes; }
     /// Worker w's share of the preparation; returns the triangles every tile tests.
     std::vector<uint32_t> prepare(unsigned w, unsigned workers) {
         projected.project(w, workers);
         barrier.wait();
-        if (!bins) return {};
+        if (!bins) {
+            projected.frame_subtrees();
+            barrier.wait();
+            if (w == 0) projected.frame_top();
+            barrier.wait();
+            return {};
+        }
         bins->count(w);
         barrier.wait();
         bins->place(w);
         barrier.wait();
         return bins->unknown();
     }
-    ProjectedPoints projected;
+    ProjectedScene projected;
     std::optional<TriangleBins> bins;
     Barrier barrier;
 };
@@ -121,23 +132,27 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
     const unsigned n_workers = std::max(1u, std::min<unsigned>(threads, unsigned(std::max<std::size_t>(n_tiles, 1))));
     constexpr bool kTiles = std::is_same_v<Rays, CameraRays> && !kBruteForce;
     std::optional<std::conditional_t<kTiles, CameraCast, int>> camera;
-    if constexpr (kTiles) camera.emplace(scene, rays, n_workers);
+    if constexpr (kTiles) {
+        if (CameraCast::fits(rays.spec()) && CameraCast::fits(scene)) camera.emplace(scene, rays, n_workers);
+    }
     auto work = [&](unsigned w) {
         if constexpr (kTiles) {
-            const std::vector<uint32_t> unknown = camera->prepare(w, n_workers);
-            TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context);
-            for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
-                if (camera->bins)
-                    tracer.trace_bin(tile, camera->bins->begin(tile), camera->bins->end(tile), unknown, store);
-                else
-                    tracer.trace(tile, store);
-                tile_done();
+            if (camera) {
+                const std::vector<uint32_t> unknown = camera->prepare(w, n_workers);
+                TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context);
+                for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
+                    if (camera->bins)
+                        tracer.trace_bin(tile, camera->bins->begin(tile), camera->bins->end(tile), unknown, store);
+                    else
+                        tracer.trace(tile, store);
+                    tile_done();
+                }
+                return;
             }
-        } else {
-            for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
-                trace_rays(tile);
-                tile_done();
-            }
+        }
+        for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
+            trace_rays(tile);
+            tile_done();
         }
     };
     std::vector<std::thread> workers;

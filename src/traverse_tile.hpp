@@ -1,7 +1,8 @@
 // Coherent camera rays. Through a BVH, each tile finds its entry node, then its 8x8-pixel
-// packets traverse together: nodes are culled once per packet against its frustum and
-// against the farthest depth its rays still search, and a leaf's triangles are tested
-// only on the pixels whose centres their projection can cover. On a flat scene (no BVH)
+// packets traverse together: nodes are culled once per packet against its pixels (with
+// the node's image rectangle, projected_scene.hpp) and against the farthest depth its
+// rays still search, and a leaf's triangles are tested only on the pixels whose centres
+// their projection can cover. On a flat scene (no BVH)
 // a tile takes the triangles binned to it instead (bin_triangles.hpp). The ray-triangle
 // test itself is the per-ray one (test_triangle), so every result equals the ray-by-ray
 // traversal's; only the work of finding candidates is shared. Frustum and occlusion
@@ -22,7 +23,7 @@
 
 #include "camera_rays.hpp"
 #include "bin_triangles.hpp"
-#include "projected_points.hpp"
+#include "projected_scene.hpp"
 #include "traverse.hpp"
 
 namespace vrc {
@@ -41,6 +42,13 @@ inline bool any(Mask4 m) {
 #endif
 }
 
+/// Pixels [c0, c1] x [r0, r1] of a block, in its own coordinates (inclusive), and a lower
+/// bound on the depth of what is there to hit.
+struct PixelRect {
+    int64_t c0, c1, r0, r1;
+    double near = -HUGE_VAL;
+};
+
 template <template <class> class KernelT, class Real>
 class TileTracer {
     using Kernel = KernelT<Real>;
@@ -54,20 +62,16 @@ class TileTracer {
     };
 
    public:
-    TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedPoints& projected, const CastContext& context)
+    TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, const CastContext& context)
         : scene_(scene), rays_(rays), projected_(projected), context_(context), map_(rays.pixel_map()) {
-        const int64_t n = CameraRays::kTile * CameraRays::kTile;
+        const int64_t n = kStride * kStride;
         ray_.resize(n);
         kernel_.resize(n);
         hit_.resize(n);
         bound_.resize(n);
         scale_.resize(n);
-        depth_ = plane(map_.depth, 0);
-        // lane 0: the depth at a box's farthest corner; lane 1: minus the depth at its nearest
-        for (int k = 0; k < 3; ++k) {
-            depth_a_[k] = Double4{depth_.a[k], -depth_.a[k], 0, 0};
-            depth_hi_[k] = Mask4{depth_.a[k] >= 0 ? -1 : 0, depth_.a[k] >= 0 ? 0 : -1, 0, 0};
-        }
+        depth_bound_.assign(n, -HUGE_VAL);
+        quad_.assign(n / 4, -HUGE_VAL);
     }
 
     /// Rays go through the BVH in square packets of kPacket x kPacket pixels: small enough
@@ -75,6 +79,8 @@ class TileTracer {
     /// needs), large enough to share the node tests. Frog contour at 1024x1024
     /// (benchmarks/instructions.py): 505, 472 and 591 instructions per ray for 4, 8 and 16.
     static constexpr int64_t kPacket = 8;
+    /// Per-pixel arrays hold a whole tile (a flat scene's block), row by row.
+    static constexpr int64_t kStride = CameraRays::kTile, kQuads = kStride / 2;
 
     /// Traces the tile's rays, packet by packet, and calls store(pixel, ray, hit) for each.
     template <class Store>
@@ -114,7 +120,7 @@ class TileTracer {
     template <class Store>
     void trace(const CameraRays::TilePixels& p, uint32_t entry, Store& store) {
         start(p);
-        traverse(p, entry);
+        traverse(entry);
         finish(store);
     }
 
@@ -124,14 +130,12 @@ class TileTracer {
     /// every node the tile's frustum meets, so its packets skip the levels above; kNoNode
     /// when the frustum meets none.
     uint32_t entry_node(const CameraRays::TilePixels& t) {
-        set_sides(t);
-        far_ = HUGE_VAL;
-        double near;
-        if (!visible(scene_.nodes[0].box, near)) return kNoNode;
+        set_block(t);
+        if (!overlaps(projected_.node(0).rect)) return kNoNode;
         uint32_t current = 0;
-        while (!scene_.nodes[current].is_leaf()) {
-            const uint32_t left = scene_.nodes[current].index;
-            const bool vl = visible(scene_.nodes[left].box, near), vr = visible(scene_.nodes[left + 1].box, near);
+        while (projected_.node(current).count == 0) {
+            const uint32_t left = projected_.node(current).index;
+            const bool vl = overlaps(projected_.node(left).rect), vr = overlaps(projected_.node(left + 1).rect);
             if (vl == vr) return vl ? current : kNoNode;
             current = vl ? left : left + 1;
         }
@@ -141,27 +145,44 @@ class TileTracer {
     /// Empties the rays of the block p; they are made when first tested (most blocks of a
     /// sparse frame see no triangle).
     void start(const CameraRays::TilePixels& p) {
-        i0_ = p.i0;
-        r0_ = p.r0;
+        set_block(p);
+        // (an odd width or height leaves a column or row of quads half outside the block:
+        // its outside slots hold -inf, so they never keep a node visible)
+        for (int64_t r = 0; r < height_ + (height_ & 1); ++r)
+            for (int64_t c = 0; c < width_ + (width_ & 1); ++c) {
+                const int64_t j = c + r * kStride;
+                const bool inside = c < width_ && r < height_;
+                depth_bound_[j] = inside ? HUGE_VAL : -HUGE_VAL;
+                if (!inside) continue;
+                kernel_[j].reset();
+                hit_[j] = Hit<Real>{};
+            }
+        for (int64_t r = 0; r < (height_ + 1) / 2; ++r)
+            for (int64_t c = 0; c < (width_ + 1) / 2; ++c) quad_[c + r * kQuads] = HUGE_VAL;
+    }
+
+    /// Makes p the block whose pixels are tested.
+    void set_block(const CameraRays::TilePixels& p) {
+        i0_ = p.i0, i1_ = p.i1, r0_ = p.r0, r1_ = p.r1;
         width_ = p.i1 - p.i0 + 1;
         height_ = p.r1 - p.r0 + 1;
-        for (int64_t j = 0, n = width_ * height_; j < n; ++j) {
-            kernel_[j].reset();
-            hit_[j] = Hit<Real>{};
-            bound_[j] = rays_.spec().far;  // a depth until the ray exists, then its t
-            scale_[j] = 1;
-        }
-        far_ = HUGE_VAL;
     }
+
+    /// Whether an image rectangle meets the block's pixels.
+    [[nodiscard]] bool overlaps(const ImageRect& q) const { return q.c0 <= i1_ && q.c1 >= i0_ && q.r0 <= r1_ && q.r1 >= r0_; }
 
     template <class Store>
     void finish(Store& store) {
-        for (int64_t j = 0, n = width_ * height_; j < n; ++j) store(pixel(j), ray_[j], hit_[j]);  // ray_ read on hits only
+        for (int64_t r = 0; r < height_; ++r)
+            for (int64_t c = 0; c < width_; ++c) {
+                const int64_t j = c + r * kStride;
+                store(pixel(j), ray_[j], hit_[j]);  // ray_ read on hits only
+            }
     }
 
-    /// The image pixel of the block's j-th ray.
+    /// The image pixel of the block's ray j (column j % kStride, row j / kStride).
     [[nodiscard]] std::size_t pixel(int64_t j) const {
-        return std::size_t((i0_ + j % width_) + (r0_ + j / width_) * int64_t(rays_.spec().nx));
+        return std::size_t((i0_ + j % kStride) + (r0_ + j / kStride) * int64_t(rays_.spec().nx));
     }
 
     /// Half-space a.q + b >= 0 of q = P - eye, with its rounding slack over the scene.
@@ -190,32 +211,17 @@ class TileTracer {
         return plane(a, hi * map_.den0 - form0);
     }
 
-    /// Whether the box may hold a point some ray of the tile reaches before its bound;
-    /// sets the box's nearest depth (the traversal's front-to-back key).
-    [[nodiscard]] bool visible(const Box& box, double& near) const {
-        Double4 value = side_c_;
-        for (int k = 0; k < 3; ++k) {
-            const double l = box.lo[k], h = box.hi[k];
-            value += side_a_[k] * (side_hi_[k] ? Double4{h, h, h, h} : Double4{l, l, l, l});  // farthest corners
-        }
-        if (any(value < side_floor_)) return false;
-        Double4 depth = Double4{depth_.c, -depth_.c, 0, 0};
-        for (int k = 0; k < 3; ++k) {
-            const double l = box.lo[k], h = box.hi[k];
-            depth += depth_a_[k] * (depth_hi_[k] ? Double4{h, h, h, h} : Double4{l, l, l, l});
-        }
-        // The side planes pass through a pinhole's eye, so they also admit the mirror image
-        // of the frustum behind it: a box wholly nearer than the near plane is culled here.
-        if (depth[0] + depth_.slack + projected_.depth_slack() < rays_.spec().near) return false;
-        near = -depth[1] - depth_.slack;
-        return near <= far_;
-    }
-
-    /// The farthest depth any ray of the tile still searches (rounded up).
-    void update_far() {
-        double far = 0;
-        for (int64_t j = 0, n = width_ * height_; j < n; ++j) far = std::max(far, bound_[j] * scale_[j]);
-        far_ = far * (1 + 1e-12) + depth_.slack + projected_.depth_slack();
+    /// Whether a node may hold a triangle some ray of the block reaches before its hit:
+    /// its rectangle meets the block, and some 2x2 quad of pixels there still searches
+    /// beyond the node's nearest depth (a hierarchical depth test, in the spirit of Greene,
+    /// Kass and Miller, "Hierarchical Z-buffer visibility", SIGGRAPH 1993).
+    [[nodiscard]] bool visible(const ImageRect& q) const {
+        if (!overlaps(q)) return false;
+        const PixelRect p = local(q);
+        for (int64_t r = p.r0 >> 1; r <= p.r1 >> 1; ++r)
+            for (int64_t c = p.c0 >> 1; c <= p.c1 >> 1; ++c)
+                if (quad_[c + r * kQuads] >= p.near) return true;
+        return false;
     }
 
     /// The block's four side planes, one per lane.
@@ -247,93 +253,89 @@ class TileTracer {
         return any(all_out);
     }
 
-    void traverse(const CameraRays::TilePixels& p, uint32_t entry) {
-        set_sides(p);
-        update_far();
-        struct Pending {
-            uint32_t node;
-            double near;
-        } stack[128];
+    void traverse(uint32_t entry) {
+        const ProjectedNode* stack[128];
         int top = 0;
-        double near;
-        if (!visible(scene_.nodes[entry].box, near)) return;
-        uint32_t current = entry;
+        const ProjectedNode* node = &projected_.node(entry);
+        if (!visible(node->rect)) return;
         for (;;) {
-            const Node& node = scene_.nodes[current];
-            if (node.is_leaf()) {
-                bool changed = false;
-                for (uint32_t i = node.index, end = node.index + node.count; i < end; ++i) changed |= test(i);
-                if (changed) update_far();
+            if (node->count != 0) {
+                for (uint32_t i = node->index, end = node->index + node->count; i < end; ++i) {
+                    const ImageRect q = projected_.triangle(i);
+                    if (overlaps(q)) test_pixels(i, local(q));
+                }
             } else {
-                const uint32_t left = node.index;
-                double nl, nr;
-                const bool vl = visible(scene_.nodes[left].box, nl), vr = visible(scene_.nodes[left + 1].box, nr);
+                const ProjectedNode* left = &projected_.node(node->index);
+                const bool vl = visible(left[0].rect), vr = visible(left[1].rect);
                 if (vl || vr) {
-                    uint32_t first = left, second = left + 1;
-                    if (!vl || (vr && nr < nl)) {
-                        std::swap(first, second);
-                        std::swap(nl, nr);
+                    const ProjectedNode *first = left, *second = left + 1;
+                    if (!vl || (vr && second->rect.near < first->rect.near)) std::swap(first, second);
+                    if (vl && vr) {
+                        prefetch(*second);
+                        stack[top++] = second;
                     }
-                    if (vl && vr) stack[top++] = {second, nr};
-                    current = first;
+                    prefetch(*first);
+                    node = first;
                     continue;
                 }
             }
-            do {  // pop, skipping nodes that now lie beyond every ray's bound
+            do {  // pop, skipping nodes now hidden behind the hits found
                 if (top == 0) return;
                 --top;
-            } while (stack[top].near > far_);
-            current = stack[top].node;
+            } while (!visible(stack[top]->rect));
+            node = stack[top];
         }
     }
 
-    /// Tests triangle i on the tile's pixels its projection can cover; true when a ray's
-    /// bound moved.
-    bool test(uint32_t i) {
-        PixelRect rect{0, width_ - 1, 0, height_ - 1};
-        const auto reach = projected_.rect(scene_.triangles.data() + 3 * std::size_t(i), i0_, r0_, width_, height_,
-                                           rays_.spec().near, far_, rect);
-        return reach != ProjectedPoints::Reach::none && test_pixels(i, rect);
+    /// Starts loading what entering `node` reads: its children, or its triangles' points.
+    void prefetch(const ProjectedNode& node) const {
+        if (node.count == 0) return __builtin_prefetch(&projected_.node(node.index));
+        __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(node.index));
     }
 
-    /// Tests triangle i on the block's pixels in `rect`; true when a ray's bound moved.
-    bool test_pixels(uint32_t i, const PixelRect& rect) {
-        bool changed = false;
+    /// An image rectangle that meets the block, in the block's coordinates.
+    [[nodiscard]] PixelRect local(const ImageRect& q) const {
+        return {std::max<int64_t>(q.c0, i0_) - i0_, std::min<int64_t>(q.c1, i1_) - i0_, std::max<int64_t>(q.r0, r0_) - r0_,
+                std::min<int64_t>(q.r1, r1_) - r0_, q.near};
+    }
+
+    /// Tests triangle i on the block's pixels in `rect`.
+    void test_pixels(uint32_t i, const PixelRect& rect) {
         for (int64_t r = rect.r0; r <= rect.r1; ++r)
             for (int64_t c = rect.c0; c <= rect.c1; ++c) {
-                const int64_t j = c + r * width_;
-                if (rect.near - projected_.depth_slack() > bound_[j] * scale_[j] * (1 + 1e-12)) continue;  // beyond this ray's hit
+                const int64_t j = c + r * kStride;
+                if (rect.near > depth_bound_[j]) continue;  // beyond this ray's hit
                 if (!kernel_[j]) make_ray(j);
                 const double before = bound_[j];
                 test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
-                changed |= bound_[j] != before;
+                if (bound_[j] == before) continue;
+                depth_bound_[j] = bound_[j] * scale_[j] * (1 + 1e-12) + projected_.depth_slack();  // rounded up
+                const int64_t q = (j & (kStride - 2)) + (j / (2 * kStride)) * 2 * kStride;  // the quad's first pixel
+                quad_[(c >> 1) + (r >> 1) * kQuads] = std::max(std::max(depth_bound_[q], depth_bound_[q + 1]),
+                                                               std::max(depth_bound_[q + kStride], depth_bound_[q + kStride + 1]));
             }
-        return changed;
     }
 
     void make_ray(int64_t j) {
         ray_[j] = rays_.ray(pixel(j));
         kernel_[j].emplace(ray_[j], context_);
-        bound_[j] = ray_[j].tmax;
+        bound_[j] = ray_[j].tmax;  // t; depth_bound_ stays unbounded until a hit
         scale_[j] = dot(map_.depth, ray_[j].dir);  // depth per unit of t
     }
 
     const Scene& scene_;
     const CameraRays& rays_;
-    const ProjectedPoints& projected_;
+    const ProjectedScene& projected_;
     CastContext context_;
     CameraRays::PixelMap map_;
-    Plane depth_;
-    Double4 depth_a_[3];  // the depth plane's farthest and nearest corners, lanes 0 and 1
-    Mask4 depth_hi_[3];
     Double4 side_c_, side_floor_, side_a_[3];  // the side planes, one per lane
     Mask4 side_hi_[3];                         // lanes whose plane takes the box's hi corner on axis k
-    double far_ = HUGE_VAL;
-    int64_t i0_ = 0, r0_ = 0, width_ = 0, height_ = 0;
+    int64_t i0_ = 0, i1_ = 0, r0_ = 0, r1_ = 0, width_ = 0, height_ = 0;
     std::vector<Ray> ray_;
     std::vector<std::optional<Kernel>> kernel_;
     std::vector<Hit<Real>> hit_;
-    std::vector<double> bound_, scale_;
+    std::vector<double> bound_, scale_, depth_bound_;
+    std::vector<double> quad_;  // the largest depth_bound_ of each 2x2 quad of pixels  // t of the hit, depth per unit t, depth of the hit rounded up
 };
 
 }  // namespace vrc

@@ -127,3 +127,43 @@ def test_flat_scene_is_the_one_shot_cast():
     assert hits["triangle_id"][0] >= 0
     with pytest.raises(TypeError, match="bvh"):
         vrc.Scene(mesh, bvh="no")
+
+
+def test_images_wider_than_tiles_index():
+    """Image rectangles hold 16-bit pixel indices: a wider image goes ray by ray through
+    the BVH, a scene without one refuses it, and the one-shot cast builds a BVH for it."""
+    mesh = bumpy_sphere(2)
+    cam = vrc.Camera((0, 0, 3), (0, 0, 0), (0, 1, 0), d=1.0, w=1.2, h=1.2 / 70_000, nx=70_000, ny=1)
+    scene = vrc.Scene(mesh)
+    assert compare(scene, scene, cam) > 1000
+    with pytest.raises(ValueError, match="65535 x 65535"):
+        vrc.Scene(mesh, bvh=False).cast(cam)
+    one_shot = vrc.cast(mesh, cam, arrays=["TriangleId"])["TriangleId"]
+    np.testing.assert_array_equal(one_shot, scene.cast(cam, arrays=["TriangleId"])["TriangleId"])
+
+
+def test_unused_points_are_dropped():
+    """The core keeps only the points triangles use, renumbered in the order they are
+    first used: points far from the mesh change neither the image nor the memory."""
+    mesh = bumpy_sphere(3)
+    far = np.vstack([mesh.points, np.random.default_rng(0).uniform(-1e6, 1e6, (500, 3))])
+    padded = type(mesh)(far, mesh.faces)
+    cam = around(mesh, nx=80, ny=60)
+    for bvh in (True, False):
+        a, b = vrc.Scene(mesh, bvh=bvh), vrc.Scene(padded, bvh=bvh)
+        assert a.memory_bytes == b.memory_bytes
+        assert compare(b, vrc.Scene(mesh), cam) > 500
+        np.testing.assert_array_equal(a.cast(cam)["Barycentric"], b.cast(cam)["Barycentric"])
+
+
+def test_casts_keep_their_working_memory():
+    """A camera cast's projected points and nodes (16 bytes each) stay with the scene for
+    the next cast rather than being allocated afresh."""
+    mesh = bumpy_sphere(3)
+    scene = vrc.Scene(mesh)
+    before = scene.memory_bytes
+    scene.cast(around(mesh))
+    after = scene.memory_bytes
+    assert after - before == 16 * (mesh.n_points + scene._core.n_nodes)
+    scene.cast(around(mesh, view="xy", nx=120, ny=90))
+    assert scene.memory_bytes == after

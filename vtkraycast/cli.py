@@ -14,7 +14,7 @@ from vtkmodules.vtkCommonDataModel import vtkImageData
 from .camera import _VIEWS, Camera
 from .image import fill_image
 from .picture import barycentric_rgba, write_png
-from .scene import STRATEGIES, Scene
+from .scene import STRATEGIES, one_shot_scene
 
 
 def default_scene() -> Any:
@@ -66,7 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     camera = Camera.framing(mesh.bounds, view=args.view, nx=nx, ny=ny)
     arrays = ["TriangleId", "CellId", "Barycentric", "Depth", "Normal", "vtkValidPointMask"]
     cast_start = time.perf_counter()
-    scene = Scene(mesh, threads=args.threads, bvh=False)  # one camera: no BVH needed
+    scene = one_shot_scene(mesh, camera, threads=args.threads)
     camera, buffers = scene.buffers(camera, arrays=arrays, strategy=args.strategy, threads=args.threads)
     elapsed = time.perf_counter() - cast_start
     pv.wrap(fill_image(vtkImageData(), camera, buffers)).save(args.output)

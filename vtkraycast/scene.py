@@ -329,5 +329,12 @@ def cast(mesh: Any, camera: Camera | Any, **options: Any) -> Any:
     >>> int(image["vtkValidPointMask"].sum()) > 0
     True
     """
-    threads = options.get("threads")
-    return Scene(mesh, threads=threads, bvh=False).cast(camera, **options)
+    camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
+    return one_shot_scene(mesh, camera, threads=options.get("threads")).cast(camera, **options)
+
+
+def one_shot_scene(mesh: Any, camera: Camera, *, threads: int | None = None) -> Scene:
+    """The scene one cast from ``camera`` needs: without a BVH (its triangles are binned to
+    the image's tiles) unless the image is wider or higher than binning allows
+    (``_core.max_binned_pixels``)."""
+    return Scene(mesh, threads=threads, bvh=max(camera.nx, camera.ny) > _core.max_binned_pixels)

@@ -1,7 +1,9 @@
-// A scene without a hierarchy: what a single camera cast needs (its triangles are binned
-// to the image's tiles instead, bin_triangles.hpp).
+// What every scene's assembly shares (its frame, its points in the order the triangles use
+// them), and the scene without a hierarchy that a single camera cast needs (its triangles
+// are binned to the image's tiles instead, bin_triangles.hpp).
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "bvh.hpp"
 
@@ -30,10 +32,26 @@ void frame_scene(Scene& scene, const double* points, const uint32_t* triangles, 
     scene.sphere_radius = std::sqrt(r2);
 }
 
+void order_points(Scene& scene, const double* points, std::size_t n_points) {
+    constexpr uint32_t kUnused = UINT32_MAX;
+    std::vector<uint32_t> index(n_points, kUnused);
+    uint32_t n_used = 0;
+    for (uint32_t& p : scene.triangles) {
+        if (index[p] == kUnused) index[p] = n_used++;
+        p = index[p];
+    }
+    std::vector<double>().swap(scene.points);
+    reserve_huge(scene.points, 3 * std::size_t(n_used));
+    scene.points.resize(3 * std::size_t(n_used));
+    for (std::size_t p = 0; p < n_points; ++p)
+        if (index[p] != kUnused)
+            for (int k = 0; k < 3; ++k) scene.points[3 * std::size_t(index[p]) + k] = points[3 * p + k];
+}
+
 Scene flat_scene(const double* points, std::size_t n_points, const uint32_t* triangles, std::size_t n_triangles) {
     Scene scene;
-    scene.points.assign(points, points + 3 * n_points);
     scene.triangles.assign(triangles, triangles + 3 * n_triangles);
+    order_points(scene, points, n_points);
     scene.prim_ids.resize(n_triangles);
     for (std::size_t i = 0; i < n_triangles; ++i) scene.prim_ids[i] = uint32_t(i);
     if (n_triangles > 0) frame_scene(scene, points, triangles, n_triangles);

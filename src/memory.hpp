@@ -1,0 +1,81 @@
+// Large buffers: transparent huge pages for them (a BVH traversal's random reads miss the
+// TLB on 4 KiB pages), and the working memory a scene lends its camera casts and keeps for
+// the next one (fresh pages would cost a page fault and their zeroing on every cast).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <vector>
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
+namespace vrc {
+
+/// Asks for transparent huge pages over a buffer of 4 MiB or more (its whole 4 KiB pages),
+/// before its pages are first touched. Linux only; elsewhere a no-op.
+inline void advise_huge(void* data, std::size_t bytes) {
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+    if (bytes < (std::size_t(4) << 20)) return;
+    const auto begin = (reinterpret_cast<std::uintptr_t>(data) + 4095) & ~std::uintptr_t(4095);
+    const auto end = (reinterpret_cast<std::uintptr_t>(data) + bytes) & ~std::uintptr_t(4095);
+    if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
+#else
+    (void)data, (void)bytes;
+#endif
+}
+
+/// Reserves room for n elements, in huge pages where large.
+template <class T>
+void reserve_huge(std::vector<T>& v, std::size_t n) {
+    v.reserve(n);
+    advise_huge(v.data(), n * sizeof(T));
+}
+
+/// Blocks of bytes, one per cast running at a time (casts may run concurrently from
+/// several Python threads: the GIL is released).
+class ScratchPool {
+   public:
+    struct Block {
+        std::unique_ptr<std::byte[]> data;  // aligned like any new[] (at least 16 bytes)
+        std::size_t size = 0;
+    };
+
+    /// A block of at least `bytes`: a kept one when one is large enough, else a new one.
+    [[nodiscard]] Block take(std::size_t bytes) {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            for (auto b = free_.begin(); b != free_.end(); ++b)
+                if (b->size >= bytes) {
+                    Block block = std::move(*b);
+                    free_.erase(b);
+                    return block;
+                }
+        }
+        Block block{std::unique_ptr<std::byte[]>(new std::byte[bytes]), bytes};
+        advise_huge(block.data.get(), bytes);
+        return block;
+    }
+
+    /// Keeps `block` for a later cast.
+    void give(Block block) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        free_.push_back(std::move(block));
+    }
+
+    /// Bytes kept between casts.
+    [[nodiscard]] std::size_t bytes() const {
+        std::lock_guard<std::mutex> lock(mutex_);
+        std::size_t total = 0;
+        for (const Block& b : free_) total += b.size;
+        return total;
+    }
+
+   private:
+    mutable std::mutex mutex_;
+    std::vector<Block> free_;
+};
+
+}  // namespace vrc

@@ -1,0 +1,270 @@
+// A scene seen from one camera, prepared once per cast by all render workers: every point
+// projected into the image, from the points each triangle's pixel rectangle and nearest
+// depth, and through a BVH each node's rectangle (the union of its triangles').
+// The tile tracer culls nodes and triangles against a packet with a few integer compares
+// instead of plane tests, and a node's rectangle is tighter than its box's projection.
+#pragma once
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <vector>
+#if defined(__SSE4_1__)
+#include <immintrin.h>
+#endif
+
+#include "bvh.hpp"
+#include "camera_rays.hpp"
+#include "kernel_common.hpp"
+
+namespace vrc {
+
+/// Pixels [c0, c1] x [r0, r1] of the image (inclusive) that may see something, none of it
+/// nearer than `near`. Empty is c0 = r0 = kMaxPixels > c1 = r1 = 0, the identity of
+/// `join` and never overlapping a block, so images are at most kMaxPixels wide and high.
+struct ImageRect {
+    static constexpr int64_t kMaxPixels = 65535;
+    uint16_t c0, c1, r0, r1;
+    float near;
+
+    [[nodiscard]] bool empty() const { return c0 > c1; }
+    void join(const ImageRect& o) {
+        c0 = std::min(c0, o.c0), c1 = std::max(c1, o.c1);
+        r0 = std::min(r0, o.r0), r1 = std::max(r1, o.r1);
+        near = std::min(near, o.near);
+    }
+};
+constexpr ImageRect kNoPixels{uint16_t(ImageRect::kMaxPixels), 0, uint16_t(ImageRect::kMaxPixels), 0, HUGE_VALF};
+
+/// A BVH node as a camera cast traverses it: its image rectangle beside its links (as in
+/// Node), 16 bytes, so a node's children are tested and entered from one cache line
+/// without touching the BVH's own boxes.
+struct ProjectedNode {
+    static constexpr std::size_t kMaxNodes = std::size_t(1) << 28;  // for the 28-bit index
+    ImageRect rect;
+    uint32_t index : 28;  ///< first child, or first triangle
+    uint32_t count : 4;   ///< triangles of a leaf (at most 8), 0 for an inner node
+};
+static_assert(sizeof(ProjectedNode) == 16, "projected nodes are meant to be 16 bytes");
+
+/// Each point's pixel column, row and depth for one camera, computed once per cast (the
+/// workers share the points out): a point serves about six triangles. Single precision,
+/// widened by its rounding where used. A point with no usable projection (near or behind a
+/// pinhole's eye plane) is flagged instead. Through a BVH, also every node's ImageRect
+/// (a triangle's is recomputed where needed: cheaper than storing it).
+class ProjectedScene {
+    static constexpr double kEps = std::numeric_limits<double>::epsilon();
+
+   public:
+    ProjectedScene(const Scene& scene, const CameraRays& rays)
+        : scene_(scene), rays_(rays), map_(rays.pixel_map()) {
+        const std::size_t n_points = scene.points.size() / 3, n_nodes = scene.has_bvh() ? scene.nodes.size() : 0;
+        memory_ = scene.scratch->take(n_points * 4 * sizeof(float) + n_nodes * sizeof(ProjectedNode));
+        points_ = new (memory_.data.get()) float[4 * n_points];  // trivial types: no initialisation
+        node_ = new (memory_.data.get() + n_points * 4 * sizeof(float)) ProjectedNode[n_nodes];
+        const CameraSpec& c = rays.spec();
+        double depth_size = 0, parallel_size = std::fabs(map_.col0) + std::fabs(map_.row0);
+        for (int k = 0; k < 3; ++k) {
+            to_anchor_[k] = scene.anchor[k] - c.eye[k];
+            // farthest reach of the scene's box from the anchor on this axis
+            reach_[k] = std::max(std::fabs(double(scene.bounds.lo[k])), std::fabs(double(scene.bounds.hi[k])));
+            if (!(reach_[k] < HUGE_VAL)) reach_[k] = 0;  // empty scene
+            const double extent = std::fabs(to_anchor_[k]) + reach_[k];  // bounds |P - eye| on axis k
+            depth_size += std::fabs(map_.depth[k]) * extent;
+            parallel_size += std::max(std::fabs(map_.col[k]), std::fabs(map_.row[k])) * extent;
+        }
+        // (a parallel ray's origin leaves the eye plane by its own rounding)
+        const double eye = std::max(std::fabs(c.eye[0]), std::max(std::fabs(c.eye[1]), std::fabs(c.eye[2])));
+        depth_slack_ = 16 * kEps * (depth_size + (c.parallel ? eye + c.width + c.height : 0));
+        // The projection's own margin (a parallel one's rounding grows with |P - eye|), plus
+        // the single-precision roundings of a column or row (stored, then less the margin)
+        // that can fall in the image: one farther out clamps to the border whatever its
+        // rounding. Rounded up to single precision, as is twice the depth slack (at least
+        // the smallest normal float, which covers a subnormal depth's rounding).
+        const double margin = map_.margin + (c.parallel ? 16 * kEps * parallel_size : 0) + 0x1p-21 * double(std::max(c.nx, c.ny) + 2);
+        margin_ = up(margin);
+        slack_ = std::max(up(2 * depth_slack_), std::numeric_limits<float>::min());
+        near_ = -up(-c.near), far_ = up(c.far);  // rounded outward
+#if defined(__SSE4_1__)
+        const float nx = float(c.nx), ny = float(c.ny);
+        margin4_ = _mm_setr_ps(-margin_, margin_, -margin_, margin_);
+        floor4_ = _mm_setr_ps(0, -1, 0, -1);
+        ceil4_ = _mm_setr_ps(nx, nx - 1, ny, ny - 1);
+#endif
+        if (n_nodes > 0) split_top();
+    }
+    ~ProjectedScene() { scene_.scratch->give(std::move(memory_)); }
+    ProjectedScene(const ProjectedScene&) = delete;
+    ProjectedScene& operator=(const ProjectedScene&) = delete;
+
+    /// Projects worker `w`'s share of the points (of `workers`).
+    void project(unsigned w, unsigned workers) {
+        const std::size_t n = scene_.points.size() / 3, begin = n * w / workers, end = n * (w + 1) / workers;
+        const CameraSpec& c = rays_.spec();
+        for (std::size_t i = begin; i < end; ++i) {
+            const double* p = scene_.point(uint32_t(i));
+            const double q[3] = {p[0] - c.eye[0], p[1] - c.eye[1], p[2] - c.eye[2]};
+            const double depth = dot(map_.depth, q);
+            const double den = c.parallel ? 1.0 : depth;
+            float* out = points_ + 4 * i;
+            out[2] = float(depth);
+            out[3] = 0;
+            if (!c.parallel && !(den > CameraRays::PixelMap::kMinDen * (std::fabs(q[0]) + std::fabs(q[1]) + std::fabs(q[2])))) {
+                out[0] = out[1] = 0;
+                out[3] = 1;  // no usable projection
+                continue;
+            }
+            out[0] = float((dot(map_.col, q) + map_.col0) / den);
+            out[1] = float((dot(map_.row, q) + map_.row0) / den);
+        }
+    }
+
+    /// Through a BVH, once every point is projected: the rectangles of the subtrees below
+    /// the top levels, taken by the workers in turn; then (`frame_top`, one worker) the top.
+    void frame_subtrees() {
+        for (std::size_t k; (k = next_subtree_.fetch_add(1)) < subtrees_.size();) frame(subtrees_[k]);
+    }
+    void frame_top() {
+        for (auto n = top_.rbegin(); n != top_.rend(); ++n) join_children(*n);
+    }
+
+    enum class Reach { none, rect, unknown };
+    /// The image pixels through which triangle `tri` may be hit, and its nearest depth:
+    /// none (its projection misses the image, or its depths all lie outside [near, far]),
+    /// rect, or unknown (a point has no usable projection: any pixel may see it).
+    [[nodiscard]] Reach frame_triangle(const uint32_t tri[3], ImageRect& out) const {
+        const float *a = (*this)[tri[0]], *b = (*this)[tri[1]], *c = (*this)[tri[2]];
+#if defined(__SSE4_1__)
+        const __m128 pa = _mm_load_ps(a), pb = _mm_load_ps(b), pc = _mm_load_ps(c);
+        const __m128 lo = _mm_min_ps(_mm_min_ps(pa, pb), pc), hi = _mm_max_ps(_mm_max_ps(pa, pb), pc);
+        const float lo_z = _mm_cvtss_f32(_mm_movehl_ps(lo, lo)), hi_z = _mm_cvtss_f32(_mm_movehl_ps(hi, hi));
+        const float unknown = _mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3));
+#else
+        const float lo_z = std::min(a[2], std::min(b[2], c[2])), hi_z = std::max(a[2], std::max(b[2], c[2]));
+        const float unknown = a[3] + b[3] + c[3];
+#endif
+        // Depth bounds: each point's stored depth is within 2^-24 of it relative, and its
+        // double projection within the depth slack; 2^-21 and twice the slack also cover
+        // the rounding of these two operations.
+        const float near = lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_), far = hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_);
+        out = kNoPixels;
+        if (near > far_ || far < near_) return Reach::none;
+        out.near = near;
+        if (unknown != 0) return Reach::unknown;
+        // The pixels whose centres lie within the margin of the projection's box (the
+        // first column c0 >= lo - margin, the last c1 <= hi + margin; rows likewise),
+        // clamped to [0, n] and [-1, n - 1].
+#if defined(__SSE4_1__)
+        __m128 v = _mm_add_ps(_mm_unpacklo_ps(lo, hi), margin4_);  // lo_c, hi_c, lo_r, hi_r widened
+        v = _mm_blend_ps(_mm_ceil_ps(v), _mm_floor_ps(v), 0b1010);
+        v = _mm_min_ps(_mm_max_ps(v, floor4_), ceil4_);
+        if (_mm_movemask_ps(_mm_cmpgt_ps(v, _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 3, 0, 1)))) & 0b0101) {  // c0 > c1 or r0 > r1
+            out = kNoPixels;
+            return Reach::none;
+        }
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(&out), _mm_packus_epi32(_mm_cvtps_epi32(v), _mm_setzero_si128()));
+#else
+        const CameraSpec& cam = rays_.spec();
+        const float nx = float(cam.nx), ny = float(cam.ny);
+        const float lo_c = std::min(a[0], std::min(b[0], c[0])), hi_c = std::max(a[0], std::max(b[0], c[0]));
+        const float lo_r = std::min(a[1], std::min(b[1], c[1])), hi_r = std::max(a[1], std::max(b[1], c[1]));
+        const float c0 = std::min(std::max(std::ceil(lo_c - margin_), 0.0f), nx);
+        const float c1 = std::min(std::max(std::floor(hi_c + margin_), -1.0f), nx - 1);
+        const float r0 = std::min(std::max(std::ceil(lo_r - margin_), 0.0f), ny);
+        const float r1 = std::min(std::max(std::floor(hi_r + margin_), -1.0f), ny - 1);
+        if (c0 > c1 || r0 > r1) {
+            out = kNoPixels;
+            return Reach::none;
+        }
+        out.c0 = uint16_t(c0), out.c1 = uint16_t(c1), out.r0 = uint16_t(r0), out.r1 = uint16_t(r1);
+#endif
+        return Reach::rect;
+    }
+
+    /// Through a BVH, triangle i's rectangle (leaf order): any pixel when it has no usable
+    /// projection.
+    [[nodiscard]] ImageRect triangle(uint32_t i) const {
+        ImageRect rect;
+        if (frame_triangle(scene_.triangles.data() + 3 * std::size_t(i), rect) == Reach::unknown) {
+            const CameraSpec& c = rays_.spec();
+            rect.c0 = rect.r0 = 0, rect.c1 = uint16_t(c.nx - 1), rect.r1 = uint16_t(c.ny - 1);
+        }
+        return rect;
+    }
+
+    /// Column, row and depth of point i, and 1 when it has no usable projection (else 0).
+    [[nodiscard]] const float* operator[](uint32_t i) const { return points_ + 4 * std::size_t(i); }
+    /// Through a BVH, node i: its rectangle is the union of its triangles'.
+    [[nodiscard]] const ProjectedNode& node(uint32_t i) const { return node_[i]; }
+    [[nodiscard]] const double* to_anchor() const { return to_anchor_; }  ///< anchor - eye
+    [[nodiscard]] const double* reach() const { return reach_; }          ///< box extent from the anchor
+    [[nodiscard]] double depth_slack() const { return depth_slack_; }     ///< rounding of any depth
+
+   private:
+    /// The nodes of the top levels (`top_`, parents before children) and the subtrees
+    /// below them: enough subtrees for the workers to share out evenly.
+    void split_top() {
+        subtrees_ = {0};
+        for (std::size_t level = 0; level < 6; ++level) {
+            std::vector<uint32_t> next;
+            for (uint32_t n : subtrees_) {
+                const Node& node = scene_.nodes[n];
+                if (node.is_leaf()) {
+                    next.push_back(n);
+                } else {
+                    top_.push_back(n);
+                    next.push_back(node.index);
+                    next.push_back(node.index + 1);
+                }
+            }
+            subtrees_.swap(next);
+        }
+    }
+
+    /// Rectangles of the subtree at node n, children first.
+    void frame(uint32_t n) {
+        const Node& node = scene_.nodes[n];
+        node_[n].index = node.index;
+        node_[n].count = node.count;
+        if (!node.is_leaf()) {
+            frame(node.index);
+            frame(node.index + 1);
+            return join_children(n);
+        }
+        ImageRect rect = kNoPixels;
+        for (uint32_t i = node.index, end = node.index + node.count; i < end; ++i) rect.join(triangle(i));
+        node_[n].rect = rect;
+    }
+    void join_children(uint32_t n) {
+        const uint32_t left = scene_.nodes[n].index;
+        node_[n].index = left;
+        node_[n].count = 0;
+        node_[n].rect = node_[left].rect;
+        node_[n].rect.join(node_[left + 1].rect);
+    }
+
+    /// x rounded up to single precision.
+    static float up(double x) {
+        const float f = float(x);
+        return double(f) < x ? std::nextafter(f, HUGE_VALF) : f;
+    }
+
+    const Scene& scene_;
+    const CameraRays& rays_;
+    CameraRays::PixelMap map_;
+    ScratchPool::Block memory_;  // holds points_ and node_
+    float* points_;
+    ProjectedNode* node_;
+    std::vector<uint32_t> top_, subtrees_;
+    std::atomic<std::size_t> next_subtree_{0};
+    double to_anchor_[3], reach_[3], depth_slack_;
+    float margin_, slack_, near_, far_;  // in single precision: see the constructor
+#if defined(__SSE4_1__)
+    __m128 margin4_, floor4_, ceil4_;  // per lane of (c0, c1, r0, r1)
+#endif
+};
+
+}  // namespace vrc
