@@ -41,6 +41,7 @@ class ScratchPool {
     struct Block {
         std::unique_ptr<std::byte[]> data;  // aligned like any new[] (at least 16 bytes)
         std::size_t size = 0;
+        bool used = false;  // holds what an earlier cast left (a pool serves one scene)
     };
 
     /// A block of at least `bytes`: a kept one when one is large enough, else a new one.

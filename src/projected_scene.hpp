@@ -65,6 +65,9 @@ class ProjectedScene {
         memory_ = scene.scratch->take(n_points * 4 * sizeof(float) + n_nodes * sizeof(ProjectedNode));
         points_ = new (memory_.data.get()) float[4 * n_points];  // trivial types: no initialisation
         node_ = new (memory_.data.get() + n_points * 4 * sizeof(float)) ProjectedNode[n_nodes];
+        if (!memory_.used)  // the links (as the BVH's) stay from one cast to the next
+            for (std::size_t i = 0; i < n_nodes; ++i) node_[i].index = scene.nodes[i].index, node_[i].count = scene.nodes[i].count;
+        memory_.used = true;
         const CameraSpec& c = rays.spec();
         double depth_size = 0, parallel_size = std::fabs(map_.col0) + std::fabs(map_.row0);
         for (int k = 0; k < 3; ++k) {
@@ -93,6 +96,8 @@ class ProjectedScene {
         margin4_ = _mm_setr_ps(-margin_, margin_, -margin_, margin_);
         floor4_ = _mm_setr_ps(0, -1, 0, -1);
         ceil4_ = _mm_setr_ps(nx, nx - 1, ny, ny - 1);
+        any4_ = _mm_setr_ps(0, nx - 1, 0, ny - 1);
+        none4_ = _mm_setr_ps(float(ImageRect::kMaxPixels), 0, float(ImageRect::kMaxPixels), 0);
 #endif
         if (n_nodes > 0) split_top();
     }
@@ -122,10 +127,17 @@ class ProjectedScene {
         }
     }
 
-    /// Through a BVH, once every point is projected: the rectangles of the subtrees below
-    /// the top levels, taken by the workers in turn; then (`frame_top`, one worker) the top.
+    /// Through a BVH, once every point is projected: worker w's share of the leaves (of
+    /// `workers`) in node order, a flat loop; once all are done, the inner nodes of the
+    /// subtrees below the top levels, taken by the workers in turn; then (`frame_top`, one
+    /// worker) the top.
+    void frame_leaves(unsigned w, unsigned workers) {
+        const std::size_t n = scene_.nodes.size();
+        for (std::size_t i = n * w / workers, end = n * (w + 1) / workers; i < end; ++i)
+            if (node_[i].count != 0) node_[i].rect = leaf(node_[i].index, node_[i].count);
+    }
     void frame_subtrees() {
-        for (std::size_t k; (k = next_subtree_.fetch_add(1)) < subtrees_.size();) frame(subtrees_[k]);
+        for (std::size_t k; (k = next_subtree_.fetch_add(1)) < subtrees_.size();) frame_inner(subtrees_[k]);
     }
     void frame_top() {
         for (auto n = top_.rbegin(); n != top_.rend(); ++n) join_children(*n);
@@ -188,10 +200,14 @@ class ProjectedScene {
     /// projection.
     [[nodiscard]] ImageRect triangle(uint32_t i) const {
         ImageRect rect;
+#if defined(__SSE4_1__)
+        store(triangle4(i, rect.near), rect);
+#else
         if (frame_triangle(scene_.triangles.data() + 3 * std::size_t(i), rect) == Reach::unknown) {
             const CameraSpec& c = rays_.spec();
             rect.c0 = rect.r0 = 0, rect.c1 = uint16_t(c.nx - 1), rect.r1 = uint16_t(c.ny - 1);
         }
+#endif
         return rect;
     }
 
@@ -204,6 +220,51 @@ class ProjectedScene {
     [[nodiscard]] double depth_slack() const { return depth_slack_; }     ///< rounding of any depth
 
    private:
+#if defined(__SSE4_1__)
+    /// `triangle(i)` as the floats (c0, c1, r0, r1), and its nearest depth, without
+    /// branches (selects instead: their outcomes are close to random).
+    __m128 triangle4(uint32_t i, float& near) const {
+        const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
+        const __m128 pa = _mm_load_ps((*this)[tri[0]]), pb = _mm_load_ps((*this)[tri[1]]), pc = _mm_load_ps((*this)[tri[2]]);
+        const __m128 lo = _mm_min_ps(_mm_min_ps(pa, pb), pc), hi = _mm_max_ps(_mm_max_ps(pa, pb), pc);
+        const float lo_z = _mm_cvtss_f32(_mm_movehl_ps(lo, lo)), hi_z = _mm_cvtss_f32(_mm_movehl_ps(hi, hi));
+        near = lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_);
+        const float far = hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_);
+        __m128 v = _mm_add_ps(_mm_unpacklo_ps(lo, hi), margin4_);
+        v = _mm_min_ps(_mm_max_ps(_mm_blend_ps(_mm_ceil_ps(v), _mm_floor_ps(v), 0b1010), floor4_), ceil4_);
+        const __m128 unknown = _mm_cmpneq_ps(_mm_shuffle_ps(hi, hi, _MM_SHUFFLE(3, 3, 3, 3)), _mm_setzero_ps());
+        v = _mm_blendv_ps(v, any4_, unknown);
+        // empty: c0 > c1 or r0 > r1, or every depth outside [near, far]
+        const __m128 inverted = _mm_cmpgt_ps(v, _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 3, 0, 1)));
+        __m128 empty = _mm_or_ps(_mm_shuffle_ps(inverted, inverted, _MM_SHUFFLE(2, 2, 0, 0)),
+                                 _mm_shuffle_ps(inverted, inverted, _MM_SHUFFLE(0, 0, 2, 2)));
+        empty = _mm_or_ps(empty, _mm_castsi128_ps(_mm_set1_epi32(-int((near > far_) | (far < near_)))));
+        near = _mm_cvtss_f32(_mm_blendv_ps(_mm_set_ss(near), _mm_set_ss(HUGE_VALF), empty));
+        return _mm_blendv_ps(v, none4_, empty);
+    }
+    static void store(__m128 v, ImageRect& rect) {
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(&rect), _mm_packus_epi32(_mm_cvtps_epi32(v), _mm_setzero_si128()));
+    }
+#endif
+
+    /// The union of the rectangles of triangles [first, first + count).
+    [[nodiscard]] ImageRect leaf(uint32_t first, uint32_t count) const {
+        ImageRect rect = kNoPixels;
+#if defined(__SSE4_1__)
+        __m128 all = none4_;
+        for (uint32_t i = first; i < first + count; ++i) {
+            float near;
+            const __m128 v = triangle4(i, near);
+            all = _mm_blend_ps(_mm_min_ps(all, v), _mm_max_ps(all, v), 0b1010);  // min c0, r0; max c1, r1
+            rect.near = std::min(rect.near, near);
+        }
+        store(all, rect);
+#else
+        for (uint32_t i = first; i < first + count; ++i) rect.join(triangle(i));
+#endif
+        return rect;
+    }
+
     /// The nodes of the top levels (`top_`, parents before children) and the subtrees
     /// below them: enough subtrees for the workers to share out evenly.
     void split_top() {
@@ -224,24 +285,15 @@ class ProjectedScene {
         }
     }
 
-    /// Rectangles of the subtree at node n, children first.
-    void frame(uint32_t n) {
-        const Node& node = scene_.nodes[n];
-        node_[n].index = node.index;
-        node_[n].count = node.count;
-        if (!node.is_leaf()) {
-            frame(node.index);
-            frame(node.index + 1);
-            return join_children(n);
-        }
-        ImageRect rect = kNoPixels;
-        for (uint32_t i = node.index, end = node.index + node.count; i < end; ++i) rect.join(triangle(i));
-        node_[n].rect = rect;
+    /// Rectangles of the inner nodes of the subtree at node n, children first.
+    void frame_inner(uint32_t n) {
+        if (node_[n].count != 0) return;
+        frame_inner(node_[n].index);
+        frame_inner(node_[n].index + 1);
+        join_children(n);
     }
     void join_children(uint32_t n) {
-        const uint32_t left = scene_.nodes[n].index;
-        node_[n].index = left;
-        node_[n].count = 0;
+        const uint32_t left = node_[n].index;
         node_[n].rect = node_[left].rect;
         node_[n].rect.join(node_[left + 1].rect);
     }
@@ -263,7 +315,7 @@ class ProjectedScene {
     double to_anchor_[3], reach_[3], depth_slack_;
     float margin_, slack_, near_, far_;  // in single precision: see the constructor
 #if defined(__SSE4_1__)
-    __m128 margin4_, floor4_, ceil4_;  // per lane of (c0, c1, r0, r1)
+    __m128 margin4_, floor4_, ceil4_, any4_, none4_;  // per lane of (c0, c1, r0, r1)
 #endif
 };
 

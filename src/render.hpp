@@ -71,6 +71,8 @@ struct CameraCast {
         projected.project(w, workers);
         barrier.wait();
         if (!bins) {
+            projected.frame_leaves(w, workers);
+            barrier.wait();
             projected.frame_subtrees();
             barrier.wait();
             if (w == 0) projected.frame_top();

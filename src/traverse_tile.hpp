@@ -93,9 +93,26 @@ class TileTracer {
                 for (int64_t i = t.i0; i <= t.i1; ++i) store(std::size_t(i + r * nx), Ray{}, Hit<Real>{});
             return;
         }
+        start(t);
+        // The packets walk the tree in turns, a node each: the node a walk enters next is
+        // prefetched while the others take their turns, so their cache misses overlap
+        // (in the spirit of Kocberber et al., "Asynchronous memory access chaining",
+        // VLDB 2015): the walks are bound by memory latency, not by instructions.
+        Walk walks[kWalks];
+        int n_walks = 0, live = 0;
         for (int64_t r = t.r0; r <= t.r1; r += kPacket)
-            for (int64_t i = t.i0; i <= t.i1; i += kPacket)
-                trace({i, std::min(i + kPacket - 1, t.i1), r, std::min(r + kPacket - 1, t.r1)}, entry, store);
+            for (int64_t i = t.i0; i <= t.i1; i += kPacket) {
+                Walk& w = walks[n_walks++];
+                w.packet = {i, std::min(i + kPacket - 1, t.i1), r, std::min(r + kPacket - 1, t.r1)};
+                w.top = 0;
+                w.node = &projected_.node(entry);
+                if (!visible(w.packet, w.node->rect)) w.node = nullptr;
+                live += w.node != nullptr;
+            }
+        while (live > 0)
+            for (int k = 0; k < n_walks; ++k)
+                if (walks[k].node != nullptr && !step(walks[k])) --live;
+        finish(store);
     }
 
     /// A flat scene's tile (no BVH): its binned triangles (`begin` to `end`, see
@@ -117,25 +134,27 @@ class TileTracer {
     }
 
    private:
-    template <class Store>
-    void trace(const CameraRays::TilePixels& p, uint32_t entry, Store& store) {
-        start(p);
-        traverse(entry);
-        finish(store);
-    }
-
     static constexpr uint32_t kNoNode = UINT32_MAX;
+    static constexpr int kWalks = int(CameraRays::kTile / kPacket * (CameraRays::kTile / kPacket));
+
+    /// One packet's traversal: its pixels (image coordinates), the node it enters next
+    /// (null when done) and the nodes it put aside, nearest last.
+    struct Walk {
+        CameraRays::TilePixels packet;
+        const ProjectedNode* node;
+        const ProjectedNode* stack[128];
+        int top;
+    };
 
     /// The tile's entry point (Reshetov et al. 2005): the deepest node whose subtree holds
     /// every node the tile's frustum meets, so its packets skip the levels above; kNoNode
     /// when the frustum meets none.
     uint32_t entry_node(const CameraRays::TilePixels& t) {
-        set_block(t);
-        if (!overlaps(projected_.node(0).rect)) return kNoNode;
+        if (!overlaps(t, projected_.node(0).rect)) return kNoNode;
         uint32_t current = 0;
         while (projected_.node(current).count == 0) {
             const uint32_t left = projected_.node(current).index;
-            const bool vl = overlaps(projected_.node(left).rect), vr = overlaps(projected_.node(left + 1).rect);
+            const bool vl = overlaps(t, projected_.node(left).rect), vr = overlaps(t, projected_.node(left + 1).rect);
             if (vl == vr) return vl ? current : kNoNode;
             current = vl ? left : left + 1;
         }
@@ -145,7 +164,9 @@ class TileTracer {
     /// Empties the rays of the block p; they are made when first tested (most blocks of a
     /// sparse frame see no triangle).
     void start(const CameraRays::TilePixels& p) {
-        set_block(p);
+        i0_ = p.i0, r0_ = p.r0;
+        width_ = p.i1 - p.i0 + 1;
+        height_ = p.r1 - p.r0 + 1;
         // (an odd width or height leaves a column or row of quads half outside the block:
         // its outside slots hold -inf, so they never keep a node visible)
         for (int64_t r = 0; r < height_ + (height_ & 1); ++r)
@@ -161,15 +182,10 @@ class TileTracer {
             for (int64_t c = 0; c < (width_ + 1) / 2; ++c) quad_[c + r * kQuads] = HUGE_VAL;
     }
 
-    /// Makes p the block whose pixels are tested.
-    void set_block(const CameraRays::TilePixels& p) {
-        i0_ = p.i0, i1_ = p.i1, r0_ = p.r0, r1_ = p.r1;
-        width_ = p.i1 - p.i0 + 1;
-        height_ = p.r1 - p.r0 + 1;
+    /// Whether an image rectangle meets the pixels p.
+    [[nodiscard]] static bool overlaps(const CameraRays::TilePixels& p, const ImageRect& q) {
+        return q.c0 <= p.i1 && q.c1 >= p.i0 && q.r0 <= p.r1 && q.r1 >= p.r0;
     }
-
-    /// Whether an image rectangle meets the block's pixels.
-    [[nodiscard]] bool overlaps(const ImageRect& q) const { return q.c0 <= i1_ && q.c1 >= i0_ && q.r0 <= r1_ && q.r1 >= r0_; }
 
     template <class Store>
     void finish(Store& store) {
@@ -215,9 +231,9 @@ class TileTracer {
     /// its rectangle meets the block, and some 2x2 quad of pixels there still searches
     /// beyond the node's nearest depth (a hierarchical depth test, in the spirit of Greene,
     /// Kass and Miller, "Hierarchical Z-buffer visibility", SIGGRAPH 1993).
-    [[nodiscard]] bool visible(const ImageRect& q) const {
-        if (!overlaps(q)) return false;
-        const PixelRect p = local(q);
+    [[nodiscard]] bool visible(const CameraRays::TilePixels& packet, const ImageRect& q) const {
+        if (!overlaps(packet, q)) return false;
+        const PixelRect p = local(packet, q);
         for (int64_t r = p.r0 >> 1; r <= p.r1 >> 1; ++r)
             for (int64_t c = p.c0 >> 1; c <= p.c1 >> 1; ++c)
                 if (quad_[c + r * kQuads] >= p.near) return true;
@@ -253,38 +269,40 @@ class TileTracer {
         return any(all_out);
     }
 
-    void traverse(uint32_t entry) {
-        const ProjectedNode* stack[128];
-        int top = 0;
-        const ProjectedNode* node = &projected_.node(entry);
-        if (!visible(node->rect)) return;
-        for (;;) {
-            if (node->count != 0) {
-                for (uint32_t i = node->index, end = node->index + node->count; i < end; ++i) {
-                    const ImageRect q = projected_.triangle(i);
-                    if (overlaps(q)) test_pixels(i, local(q));
-                }
-            } else {
-                const ProjectedNode* left = &projected_.node(node->index);
-                const bool vl = visible(left[0].rect), vr = visible(left[1].rect);
-                if (vl || vr) {
-                    const ProjectedNode *first = left, *second = left + 1;
-                    if (!vl || (vr && second->rect.near < first->rect.near)) std::swap(first, second);
-                    if (vl && vr) {
-                        prefetch(*second);
-                        stack[top++] = second;
-                    }
-                    prefetch(*first);
-                    node = first;
-                    continue;
-                }
+    /// Walk w's turn: enters its node (tests a leaf's triangles, or picks the children
+    /// to visit, nearest first), then picks its next node and prefetches it. False when
+    /// the walk is done.
+    bool step(Walk& w) {
+        const ProjectedNode* node = w.node;
+        if (node->count != 0) {
+            for (uint32_t i = node->index, end = node->index + node->count; i < end; ++i) {
+                const ImageRect q = projected_.triangle(i);
+                if (overlaps(w.packet, q)) test_pixels(i, local(w.packet, q));
             }
-            do {  // pop, skipping nodes now hidden behind the hits found
-                if (top == 0) return;
-                --top;
-            } while (!visible(stack[top]->rect));
-            node = stack[top];
+        } else {
+            const ProjectedNode* left = &projected_.node(node->index);
+            const bool vl = visible(w.packet, left[0].rect), vr = visible(w.packet, left[1].rect);
+            if (vl || vr) {
+                const ProjectedNode *first = left, *second = left + 1;
+                if (!vl || (vr && second->rect.near < first->rect.near)) std::swap(first, second);
+                if (vl && vr) {
+                    prefetch(*second);
+                    w.stack[w.top++] = second;
+                }
+                prefetch(*first);
+                w.node = first;
+                return true;
+            }
         }
+        while (w.top > 0) {  // pop, skipping nodes now hidden behind the hits found
+            const ProjectedNode* next = w.stack[--w.top];
+            if (visible(w.packet, next->rect)) {
+                w.node = next;
+                return true;
+            }
+        }
+        w.node = nullptr;
+        return false;
     }
 
     /// Starts loading what entering `node` reads: its children, or its triangles' points.
@@ -293,10 +311,11 @@ class TileTracer {
         __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(node.index));
     }
 
-    /// An image rectangle that meets the block, in the block's coordinates.
-    [[nodiscard]] PixelRect local(const ImageRect& q) const {
-        return {std::max<int64_t>(q.c0, i0_) - i0_, std::min<int64_t>(q.c1, i1_) - i0_, std::max<int64_t>(q.r0, r0_) - r0_,
-                std::min<int64_t>(q.r1, r1_) - r0_, q.near};
+    /// The part within pixels p of an image rectangle that meets them, in the block's
+    /// coordinates.
+    [[nodiscard]] PixelRect local(const CameraRays::TilePixels& p, const ImageRect& q) const {
+        return {std::max<int64_t>(q.c0, p.i0) - i0_, std::min<int64_t>(q.c1, p.i1) - i0_, std::max<int64_t>(q.r0, p.r0) - r0_,
+                std::min<int64_t>(q.r1, p.r1) - r0_, q.near};
     }
 
     /// Tests triangle i on the block's pixels in `rect`.
@@ -330,7 +349,7 @@ class TileTracer {
     CameraRays::PixelMap map_;
     Double4 side_c_, side_floor_, side_a_[3];  // the side planes, one per lane
     Mask4 side_hi_[3];                         // lanes whose plane takes the box's hi corner on axis k
-    int64_t i0_ = 0, i1_ = 0, r0_ = 0, r1_ = 0, width_ = 0, height_ = 0;
+    int64_t i0_ = 0, r0_ = 0, width_ = 0, height_ = 0;  // the block: a tile
     std::vector<Ray> ray_;
     std::vector<std::optional<Kernel>> kernel_;
     std::vector<Hit<Real>> hit_;
