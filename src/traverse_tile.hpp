@@ -93,25 +93,10 @@ class TileTracer {
                 for (int64_t i = t.i0; i <= t.i1; ++i) store(std::size_t(i + r * nx), Ray{}, Hit<Real>{});
             return;
         }
-        start(t);
-        // The packets walk the tree in turns, a node each: the node a walk enters next is
-        // prefetched while the others take their turns, so their cache misses overlap
-        // (in the spirit of Kocberber et al., "Asynchronous memory access chaining",
-        // VLDB 2015): the walks are bound by memory latency, not by instructions.
-        Walk walks[kWalks];
-        int n_walks = 0, live = 0;
+        start(t);  // the tile's pixels, shared by its packets
         for (int64_t r = t.r0; r <= t.r1; r += kPacket)
-            for (int64_t i = t.i0; i <= t.i1; i += kPacket) {
-                Walk& w = walks[n_walks++];
-                w.packet = {i, std::min(i + kPacket - 1, t.i1), r, std::min(r + kPacket - 1, t.r1)};
-                w.top = 0;
-                w.node = &projected_.node(entry);
-                if (!visible(w.packet, w.node->rect)) w.node = nullptr;
-                live += w.node != nullptr;
-            }
-        while (live > 0)
-            for (int k = 0; k < n_walks; ++k)
-                if (walks[k].node != nullptr && !step(walks[k])) --live;
+            for (int64_t i = t.i0; i <= t.i1; i += kPacket)
+                traverse({i, std::min(i + kPacket - 1, t.i1), r, std::min(r + kPacket - 1, t.r1)}, entry);
         finish(store);
     }
 
@@ -135,16 +120,6 @@ class TileTracer {
 
    private:
     static constexpr uint32_t kNoNode = UINT32_MAX;
-    static constexpr int kWalks = int(CameraRays::kTile / kPacket * (CameraRays::kTile / kPacket));
-
-    /// One packet's traversal: its pixels (image coordinates), the node it enters next
-    /// (null when done) and the nodes it put aside, nearest last.
-    struct Walk {
-        CameraRays::TilePixels packet;
-        const ProjectedNode* node;
-        const ProjectedNode* stack[128];
-        int top;
-    };
 
     /// The tile's entry point (Reshetov et al. 2005): the deepest node whose subtree holds
     /// every node the tile's frustum meets, so its packets skip the levels above; kNoNode
@@ -269,46 +244,35 @@ class TileTracer {
         return any(all_out);
     }
 
-    /// Walk w's turn: enters its node (tests a leaf's triangles, or picks the children
-    /// to visit, nearest first), then picks its next node and prefetches it. False when
-    /// the walk is done.
-    bool step(Walk& w) {
-        const ProjectedNode* node = w.node;
-        if (node->count != 0) {
-            for (uint32_t i = node->index, end = node->index + node->count; i < end; ++i) {
-                const ImageRect q = projected_.triangle(i);
-                if (overlaps(w.packet, q)) test_pixels(i, local(w.packet, q));
-            }
-        } else {
-            const ProjectedNode* left = &projected_.node(node->index);
-            const bool vl = visible(w.packet, left[0].rect), vr = visible(w.packet, left[1].rect);
-            if (vl || vr) {
-                const ProjectedNode *first = left, *second = left + 1;
-                if (!vl || (vr && second->rect.near < first->rect.near)) std::swap(first, second);
-                if (vl && vr) {
-                    prefetch(*second);
-                    w.stack[w.top++] = second;
+    /// The packet's traversal from the tile's entry node: visible children nearest first,
+    /// a leaf's triangles on the pixels their rectangles cover.
+    void traverse(const CameraRays::TilePixels& packet, uint32_t entry) {
+        const ProjectedNode* stack[128];
+        int top = 0;
+        const ProjectedNode* node = &projected_.node(entry);
+        if (!visible(packet, node->rect)) return;
+        for (;;) {
+            if (node->count != 0) {
+                for (uint32_t i = node->index, end = node->index + node->count; i < end; ++i) {
+                    const ImageRect q = projected_.triangle(i);
+                    if (overlaps(packet, q)) test_pixels(i, local(packet, q));
                 }
-                prefetch(*first);
-                w.node = first;
-                return true;
+            } else {
+                const ProjectedNode* left = &projected_.node(node->index);
+                const bool vl = visible(packet, left[0].rect), vr = visible(packet, left[1].rect);
+                if (vl || vr) {
+                    const ProjectedNode *first = left, *second = left + 1;
+                    if (!vl || (vr && second->rect.near < first->rect.near)) std::swap(first, second);
+                    if (vl && vr) stack[top++] = second;
+                    node = first;
+                    continue;
+                }
             }
+            do {  // pop, skipping nodes now hidden behind the hits found
+                if (top == 0) return;
+                node = stack[--top];
+            } while (!visible(packet, node->rect));
         }
-        while (w.top > 0) {  // pop, skipping nodes now hidden behind the hits found
-            const ProjectedNode* next = w.stack[--w.top];
-            if (visible(w.packet, next->rect)) {
-                w.node = next;
-                return true;
-            }
-        }
-        w.node = nullptr;
-        return false;
-    }
-
-    /// Starts loading what entering `node` reads: its children, or its triangles' points.
-    void prefetch(const ProjectedNode& node) const {
-        if (node.count == 0) return __builtin_prefetch(&projected_.node(node.index));
-        __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(node.index));
     }
 
     /// The part within pixels p of an image rectangle that meets them, in the block's
