@@ -6,7 +6,6 @@
 #pragma once
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -99,7 +98,6 @@ class ProjectedScene {
         any4_ = _mm_setr_ps(0, nx - 1, 0, ny - 1);
         none4_ = _mm_setr_ps(float(ImageRect::kMaxPixels), 0, float(ImageRect::kMaxPixels), 0);
 #endif
-        if (n_nodes > 0) split_top();
     }
     ~ProjectedScene() { scene_.scratch->give(std::move(memory_)); }
     ProjectedScene(const ProjectedScene&) = delete;
@@ -128,19 +126,20 @@ class ProjectedScene {
     }
 
     /// Through a BVH, once every point is projected: worker w's share of the leaves (of
-    /// `workers`) in node order, a flat loop; once all are done, the inner nodes of the
-    /// subtrees below the top levels, taken by the workers in turn; then (`frame_top`, one
-    /// worker) the top.
+    /// `workers`); once all are done, the inner nodes (`frame_inner`, one worker: a
+    /// sweep from the last node to the first, as every node's children follow it).
     void frame_leaves(unsigned w, unsigned workers) {
         const std::size_t n = scene_.nodes.size();
         for (std::size_t i = n * w / workers, end = n * (w + 1) / workers; i < end; ++i)
             if (node_[i].count != 0) node_[i].rect = leaf(node_[i].index, node_[i].count);
     }
-    void frame_subtrees() {
-        for (std::size_t k; (k = next_subtree_.fetch_add(1)) < subtrees_.size();) frame_inner(subtrees_[k]);
-    }
-    void frame_top() {
-        for (auto n = top_.rbegin(); n != top_.rend(); ++n) join_children(*n);
+    void frame_inner() {
+        for (std::size_t i = scene_.nodes.size(); i-- > 0;)
+            if (node_[i].count == 0) {
+                const ProjectedNode* child = node_ + node_[i].index;
+                node_[i].rect = child[0].rect;
+                node_[i].rect.join(child[1].rect);
+            }
     }
 
     enum class Reach { none, rect, unknown };
@@ -221,12 +220,16 @@ class ProjectedScene {
 
    private:
 #if defined(__SSE4_1__)
-    /// `triangle(i)` as the floats (c0, c1, r0, r1), and its nearest depth, without
-    /// branches (selects instead: their outcomes are close to random).
+    /// `triangle(i)` as the floats (c0, c1, r0, r1), and its nearest depth.
     __m128 triangle4(uint32_t i, float& near) const {
         const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
         const __m128 pa = _mm_load_ps((*this)[tri[0]]), pb = _mm_load_ps((*this)[tri[1]]), pc = _mm_load_ps((*this)[tri[2]]);
-        const __m128 lo = _mm_min_ps(_mm_min_ps(pa, pb), pc), hi = _mm_max_ps(_mm_max_ps(pa, pb), pc);
+        return rect4(_mm_min_ps(_mm_min_ps(pa, pb), pc), _mm_max_ps(_mm_max_ps(pa, pb), pc), near);
+    }
+    /// The rectangle (c0, c1, r0, r1) and nearest depth of projected points whose
+    /// (column, row, depth, flag) lie within [lo, hi], as frame_triangle finds them, but
+    /// without branches (selects instead: their outcomes are close to random).
+    __m128 rect4(__m128 lo, __m128 hi, float& near) const {
         const float lo_z = _mm_cvtss_f32(_mm_movehl_ps(lo, lo)), hi_z = _mm_cvtss_f32(_mm_movehl_ps(hi, hi));
         near = lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_);
         const float far = hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_);
@@ -251,51 +254,18 @@ class ProjectedScene {
     [[nodiscard]] ImageRect leaf(uint32_t first, uint32_t count) const {
         ImageRect rect = kNoPixels;
 #if defined(__SSE4_1__)
-        __m128 all = none4_;
-        for (uint32_t i = first; i < first + count; ++i) {
-            float near;
-            const __m128 v = triangle4(i, near);
-            all = _mm_blend_ps(_mm_min_ps(all, v), _mm_max_ps(all, v), 0b1010);  // min c0, r0; max c1, r1
-            rect.near = std::min(rect.near, near);
+        // the rectangle of all their points: it holds each triangle's, at a third of the work
+        __m128 lo = _mm_set1_ps(HUGE_VALF), hi = _mm_set1_ps(-HUGE_VALF);
+        for (const uint32_t *p = scene_.triangles.data() + 3 * std::size_t(first), *end = p + 3 * count; p != end; ++p) {
+            const __m128 v = _mm_load_ps((*this)[*p]);
+            lo = _mm_min_ps(lo, v);
+            hi = _mm_max_ps(hi, v);
         }
-        store(all, rect);
+        store(rect4(lo, hi, rect.near), rect);
 #else
         for (uint32_t i = first; i < first + count; ++i) rect.join(triangle(i));
 #endif
         return rect;
-    }
-
-    /// The nodes of the top levels (`top_`, parents before children) and the subtrees
-    /// below them: enough subtrees for the workers to share out evenly.
-    void split_top() {
-        subtrees_ = {0};
-        for (std::size_t level = 0; level < 6; ++level) {
-            std::vector<uint32_t> next;
-            for (uint32_t n : subtrees_) {
-                const Node& node = scene_.nodes[n];
-                if (node.is_leaf()) {
-                    next.push_back(n);
-                } else {
-                    top_.push_back(n);
-                    next.push_back(node.index);
-                    next.push_back(node.index + 1);
-                }
-            }
-            subtrees_.swap(next);
-        }
-    }
-
-    /// Rectangles of the inner nodes of the subtree at node n, children first.
-    void frame_inner(uint32_t n) {
-        if (node_[n].count != 0) return;
-        frame_inner(node_[n].index);
-        frame_inner(node_[n].index + 1);
-        join_children(n);
-    }
-    void join_children(uint32_t n) {
-        const uint32_t left = node_[n].index;
-        node_[n].rect = node_[left].rect;
-        node_[n].rect.join(node_[left + 1].rect);
     }
 
     /// x rounded up to single precision.
@@ -310,8 +280,6 @@ class ProjectedScene {
     ScratchPool::Block memory_;  // holds points_ and node_
     float* points_;
     ProjectedNode* node_;
-    std::vector<uint32_t> top_, subtrees_;
-    std::atomic<std::size_t> next_subtree_{0};
     double to_anchor_[3], reach_[3], depth_slack_;
     float margin_, slack_, near_, far_;  // in single precision: see the constructor
 #if defined(__SSE4_1__)

@@ -73,9 +73,7 @@ struct CameraCast {
         if (!bins) {
             projected.frame_leaves(w, workers);
             barrier.wait();
-            projected.frame_subtrees();
-            barrier.wait();
-            if (w == 0) projected.frame_top();
+            if (w == 0) projected.frame_inner();
             barrier.wait();
             return {};
         }
