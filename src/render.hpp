@@ -66,8 +66,10 @@ struct CameraCast {
     static bool fits(const CameraSpec& c) { return c.nx <= ImageRect::kMaxPixels && c.ny <= ImageRect::kMaxPixels; }
     /// Whether the BVH's nodes fit the projected nodes' 28-bit links (else ray by ray).
     static bool fits(const Scene& scene) { return scene.nodes.size() < ProjectedNode::kMaxNodes; }
-    /// Worker w's share of the preparation; returns the triangles every tile tests.
-    std::vector<uint32_t> prepare(unsigned w, unsigned workers) {
+    /// Worker w's share of the preparation; returns the triangles every tile tests. None
+    /// when no pixel may see the scene: every tile is then a miss.
+    std::vector<uint32_t> prepare(unsigned w, unsigned workers, const CameraRays& rays) {
+        if (!rays.may_hit()) return {};
         projected.project(w, workers);
         barrier.wait();
         if (!bins) {
@@ -138,10 +140,10 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
     auto work = [&](unsigned w) {
         if constexpr (kTiles) {
             if (camera) {
-                const std::vector<uint32_t> unknown = camera->prepare(w, n_workers);
+                const std::vector<uint32_t> unknown = camera->prepare(w, n_workers, rays);
                 TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context);
                 for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
-                    if (camera->bins)
+                    if (camera->bins && rays.tile_may_hit(tile))
                         tracer.trace_bin(tile, camera->bins->begin(tile), camera->bins->end(tile), unknown, store);
                     else
                         tracer.trace(tile, store);

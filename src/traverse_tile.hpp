@@ -100,21 +100,19 @@ class TileTracer {
         finish(store);
     }
 
-    /// A flat scene's tile (no BVH): its binned triangles (`begin` to `end`, see
-    /// bin_triangles.hpp), then those with no usable projection (`unknown`), which are
-    /// tested on the whole tile unless the tile's frustum separates them.
+    /// A flat scene's tile (no BVH) that may see the scene: its binned triangles (`begin`
+    /// to `end`, see bin_triangles.hpp), then those with no usable projection (`unknown`),
+    /// which are tested on the whole tile unless the tile's frustum separates them.
     template <class Store>
     void trace_bin(std::size_t tile, const TriangleBins::Entry* begin, const TriangleBins::Entry* end,
                    const std::vector<uint32_t>& unknown, Store&& store) {
         const CameraRays::TilePixels p = rays_.tile_pixels(tile);
         start(p);
-        if (rays_.tile_may_hit(tile)) {
-            for (const TriangleBins::Entry* e = begin; e != end; ++e)
-                test_pixels(e->triangle, {e->c0, e->c1, e->r0, e->r1, e->near});
-            if (!unknown.empty()) set_sides(p);
-            for (uint32_t i : unknown)
-                if (!separated(i)) test_pixels(i, {0, width_ - 1, 0, height_ - 1});
-        }
+        for (const TriangleBins::Entry* e = begin; e != end; ++e)
+            test_pixels(e->triangle, {e->c0, e->c1, e->r0, e->r1, e->near});
+        if (!unknown.empty()) set_sides(p);
+        for (uint32_t i : unknown)
+            if (!separated(i)) test_pixels(i, {0, width_ - 1, 0, height_ - 1});
         finish(store);
     }
 

@@ -167,3 +167,15 @@ def test_casts_keep_their_working_memory():
     assert after - before == 16 * (mesh.n_points + scene._core.n_nodes)
     scene.cast(around(mesh, view="xy", nx=120, ny=90))
     assert scene.memory_bytes == after
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_model_outside_the_depth_range(parallel):
+    """A model behind the eye, nearer than the near plane or beyond the far plane leaves
+    no tile to trace (nothing is projected): every pixel a miss, as ray by ray."""
+    mesh = bumpy_sphere(3)
+    scene = vrc.Scene(mesh)
+    base = vrc.Camera((0, 0, 3), (0, 0, 0), (0, 1, 0), nx=40, ny=30, parallel=parallel, h=3.0)
+    for cam in (base.replace(look_at=(0, 0, 6)), base.replace(near=4.5), base.replace(far=1.5)):
+        assert assert_same_as_ray_by_ray(scene, cam) == 0
+    assert assert_same_as_ray_by_ray(scene, base.replace(near=2.5, far=3.5)) > 10
