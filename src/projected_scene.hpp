@@ -1,6 +1,6 @@
 // A scene seen from one camera, prepared once per cast by all render workers: every point
 // projected into the image, from the points each triangle's pixel rectangle and nearest
-// depth, and through a BVH each node's rectangle (the union of its triangles').
+// depth, and through a BVH each node's rectangle (holding its triangles').
 // The tile tracer culls nodes and triangles against a packet with a few integer compares
 // instead of plane tests, and a node's rectangle is tighter than its box's projection.
 #pragma once
@@ -145,41 +145,27 @@ class ProjectedScene {
     enum class Reach { none, rect, unknown };
     /// The image pixels through which triangle `tri` may be hit, and its nearest depth:
     /// none (its projection misses the image, or its depths all lie outside [near, far]),
-    /// rect, or unknown (a point has no usable projection: any pixel may see it).
+    /// rect, or unknown (a point has no usable projection: every pixel).
     [[nodiscard]] Reach frame_triangle(const uint32_t tri[3], ImageRect& out) const {
         const float *a = (*this)[tri[0]], *b = (*this)[tri[1]], *c = (*this)[tri[2]];
 #if defined(__SSE4_1__)
         const __m128 pa = _mm_load_ps(a), pb = _mm_load_ps(b), pc = _mm_load_ps(c);
-        const __m128 lo = _mm_min_ps(_mm_min_ps(pa, pb), pc), hi = _mm_max_ps(_mm_max_ps(pa, pb), pc);
-        const float lo_z = _mm_cvtss_f32(_mm_movehl_ps(lo, lo)), hi_z = _mm_cvtss_f32(_mm_movehl_ps(hi, hi));
-        const float unknown = _mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3));
+        const __m128 hi = _mm_max_ps(_mm_max_ps(pa, pb), pc);
+        store(rect4(_mm_min_ps(_mm_min_ps(pa, pb), pc), hi, out.near), out);
+        if (out.empty()) return Reach::none;
+        return _mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) != 0 ? Reach::unknown : Reach::rect;
 #else
         const float lo_z = std::min(a[2], std::min(b[2], c[2])), hi_z = std::max(a[2], std::max(b[2], c[2]));
-        const float unknown = a[3] + b[3] + c[3];
-#endif
-        // Depth bounds: each point's stored depth is within 2^-24 of it relative, and its
-        // double projection within the depth slack; 2^-21 and twice the slack also cover
-        // the rounding of these two operations.
         const float near = lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_), far = hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_);
         out = kNoPixels;
         if (near > far_ || far < near_) return Reach::none;
         out.near = near;
-        if (unknown != 0) return Reach::unknown;
-        // The pixels whose centres lie within the margin of the projection's box (the
-        // first column c0 >= lo - margin, the last c1 <= hi + margin; rows likewise),
-        // clamped to [0, n] and [-1, n - 1].
-#if defined(__SSE4_1__)
-        __m128 v = _mm_add_ps(_mm_unpacklo_ps(lo, hi), margin4_);  // lo_c, hi_c, lo_r, hi_r widened
-        v = _mm_blend_ps(_mm_ceil_ps(v), _mm_floor_ps(v), 0b1010);
-        v = _mm_min_ps(_mm_max_ps(v, floor4_), ceil4_);
-        if (_mm_movemask_ps(_mm_cmpgt_ps(v, _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 3, 0, 1)))) & 0b0101) {  // c0 > c1 or r0 > r1
-            out = kNoPixels;
-            return Reach::none;
-        }
-        _mm_storel_epi64(reinterpret_cast<__m128i*>(&out), _mm_packus_epi32(_mm_cvtps_epi32(v), _mm_setzero_si128()));
-#else
         const CameraSpec& cam = rays_.spec();
         const float nx = float(cam.nx), ny = float(cam.ny);
+        if (a[3] + b[3] + c[3] != 0) {
+            out.c0 = out.r0 = 0, out.c1 = uint16_t(nx - 1), out.r1 = uint16_t(ny - 1);
+            return Reach::unknown;
+        }
         const float lo_c = std::min(a[0], std::min(b[0], c[0])), hi_c = std::max(a[0], std::max(b[0], c[0]));
         const float lo_r = std::min(a[1], std::min(b[1], c[1])), hi_r = std::max(a[1], std::max(b[1], c[1]));
         const float c0 = std::min(std::max(std::ceil(lo_c - margin_), 0.0f), nx);
@@ -191,28 +177,20 @@ class ProjectedScene {
             return Reach::none;
         }
         out.c0 = uint16_t(c0), out.c1 = uint16_t(c1), out.r0 = uint16_t(r0), out.r1 = uint16_t(r1);
-#endif
         return Reach::rect;
+#endif
     }
 
-    /// Through a BVH, triangle i's rectangle (leaf order): any pixel when it has no usable
-    /// projection.
+    /// Through a BVH, triangle i's rectangle (leaf order).
     [[nodiscard]] ImageRect triangle(uint32_t i) const {
         ImageRect rect;
-#if defined(__SSE4_1__)
-        store(triangle4(i, rect.near), rect);
-#else
-        if (frame_triangle(scene_.triangles.data() + 3 * std::size_t(i), rect) == Reach::unknown) {
-            const CameraSpec& c = rays_.spec();
-            rect.c0 = rect.r0 = 0, rect.c1 = uint16_t(c.nx - 1), rect.r1 = uint16_t(c.ny - 1);
-        }
-#endif
+        (void)frame_triangle(scene_.triangles.data() + 3 * std::size_t(i), rect);
         return rect;
     }
 
     /// Column, row and depth of point i, and 1 when it has no usable projection (else 0).
     [[nodiscard]] const float* operator[](uint32_t i) const { return points_ + 4 * std::size_t(i); }
-    /// Through a BVH, node i: its rectangle is the union of its triangles'.
+    /// Through a BVH, node i: its rectangle holds its triangles'.
     [[nodiscard]] const ProjectedNode& node(uint32_t i) const { return node_[i]; }
     [[nodiscard]] const double* to_anchor() const { return to_anchor_; }  ///< anchor - eye
     [[nodiscard]] const double* reach() const { return reach_; }          ///< box extent from the anchor
@@ -220,15 +198,14 @@ class ProjectedScene {
 
    private:
 #if defined(__SSE4_1__)
-    /// `triangle(i)` as the floats (c0, c1, r0, r1), and its nearest depth.
-    __m128 triangle4(uint32_t i, float& near) const {
-        const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
-        const __m128 pa = _mm_load_ps((*this)[tri[0]]), pb = _mm_load_ps((*this)[tri[1]]), pc = _mm_load_ps((*this)[tri[2]]);
-        return rect4(_mm_min_ps(_mm_min_ps(pa, pb), pc), _mm_max_ps(_mm_max_ps(pa, pb), pc), near);
-    }
     /// The rectangle (c0, c1, r0, r1) and nearest depth of projected points whose
-    /// (column, row, depth, flag) lie within [lo, hi], as frame_triangle finds them, but
-    /// without branches (selects instead: their outcomes are close to random).
+    /// (column, row, depth, flag) lie within [lo, hi], without branches (selects instead:
+    /// their outcomes are close to random). Depth bounds: each point's stored depth is
+    /// within 2^-24 of it relative, and its double projection within the depth slack; 2^-21
+    /// and twice the slack also cover the rounding of these operations. The pixels are
+    /// those whose centres lie within the margin of the points' box (the first column
+    /// c0 >= lo - margin, the last c1 <= hi + margin; rows likewise), clamped to [0, n] and
+    /// [-1, n - 1]; every pixel when a point has no usable projection.
     __m128 rect4(__m128 lo, __m128 hi, float& near) const {
         const float lo_z = _mm_cvtss_f32(_mm_movehl_ps(lo, lo)), hi_z = _mm_cvtss_f32(_mm_movehl_ps(hi, hi));
         near = lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_);
@@ -250,7 +227,7 @@ class ProjectedScene {
     }
 #endif
 
-    /// The union of the rectangles of triangles [first, first + count).
+    /// A rectangle holding those of triangles [first, first + count).
     [[nodiscard]] ImageRect leaf(uint32_t first, uint32_t count) const {
         ImageRect rect = kNoPixels;
 #if defined(__SSE4_1__)
