@@ -134,12 +134,23 @@ class ProjectedScene {
             if (node_[i].count != 0) node_[i].rect = leaf(node_[i].index, node_[i].count);
     }
     void frame_inner() {
-        for (std::size_t i = scene_.nodes.size(); i-- > 0;)
-            if (node_[i].count == 0) {
-                const ProjectedNode* child = node_ + node_[i].index;
-                node_[i].rect = child[0].rect;
-                node_[i].rect.join(child[1].rect);
-            }
+        for (std::size_t i = scene_.nodes.size(); i-- > 0;) {
+            if (node_[i].count != 0) continue;
+            const ProjectedNode* child = node_ + node_[i].index;
+#if defined(__SSE4_1__)
+            // both children in two loads: min c0, r0 and max c1, r1 (16-bit lanes), min
+            // near (float lane 2), the node's own links (lane 3)
+            const __m128i a = _mm_loadu_si128(reinterpret_cast<const __m128i*>(child));
+            const __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(child + 1));
+            const __m128 pixels = _mm_castsi128_ps(_mm_blend_epi16(_mm_min_epu16(a, b), _mm_max_epu16(a, b), 0b1010));
+            __m128 joined = _mm_blend_ps(pixels, _mm_min_ps(_mm_castsi128_ps(a), _mm_castsi128_ps(b)), 0b0100);
+            joined = _mm_blend_ps(joined, _mm_loadu_ps(reinterpret_cast<const float*>(node_ + i)), 0b1000);
+            _mm_storeu_ps(reinterpret_cast<float*>(node_ + i), joined);
+#else
+            node_[i].rect = child[0].rect;
+            node_[i].rect.join(child[1].rect);
+#endif
+        }
     }
 
     enum class Reach { none, rect, unknown };
