@@ -105,10 +105,14 @@ class ProjectedScene {
 
     /// Projects worker `w`'s share of the points (of `workers`).
     void project(unsigned w, unsigned workers) {
-        const std::size_t n = scene_.points.size() / 3, begin = n * w / workers, end = n * (w + 1) / workers;
-        const CameraSpec& c = rays_.spec();
-        for (std::size_t i = begin; i < end; ++i) {
+        const std::size_t n = scene_.points.size() / 3, end = n * (w + 1) / workers;
+        std::size_t i = n * w / workers;
+#if defined(__AVX__)
+        for (; i + 4 <= end; i += 4) project4(i);
+#endif
+        for (; i < end; ++i) {
             const double* p = scene_.point(uint32_t(i));
+            const CameraSpec& c = rays_.spec();
             const double q[3] = {p[0] - c.eye[0], p[1] - c.eye[1], p[2] - c.eye[2]};
             const double depth = dot(map_.depth, q);
             const double den = c.parallel ? 1.0 : depth;
@@ -208,6 +212,34 @@ class ProjectedScene {
     [[nodiscard]] double depth_slack() const { return depth_slack_; }     ///< rounding of any depth
 
    private:
+#if defined(__AVX__)
+    /// Points i to i + 3, as the loop in `project` does them one by one (the same
+    /// operations in the same order: the same floats), four lanes at a time.
+    void project4(std::size_t i) {
+        const CameraSpec& c = rays_.spec();
+        const double* p = scene_.point(uint32_t(i));
+        const auto lanes = [](double a) { return _mm256_set1_pd(a); };
+        const auto dot3 = [&](const double f[3], __m256d x, __m256d y, __m256d z) {
+            return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(lanes(f[0]), x), _mm256_mul_pd(lanes(f[1]), y)),
+                                 _mm256_mul_pd(lanes(f[2]), z));
+        };
+        const __m256d x = _mm256_sub_pd(_mm256_setr_pd(p[0], p[3], p[6], p[9]), lanes(c.eye[0]));
+        const __m256d y = _mm256_sub_pd(_mm256_setr_pd(p[1], p[4], p[7], p[10]), lanes(c.eye[1]));
+        const __m256d z = _mm256_sub_pd(_mm256_setr_pd(p[2], p[5], p[8], p[11]), lanes(c.eye[2]));
+        const __m256d depth = dot3(map_.depth, x, y, z);
+        const __m256d den = c.parallel ? lanes(1.0) : depth;
+        const __m256d abs = _mm256_castsi256_pd(_mm256_set1_epi64x(INT64_MAX));
+        const __m256d size = _mm256_add_pd(_mm256_add_pd(_mm256_and_pd(x, abs), _mm256_and_pd(y, abs)), _mm256_and_pd(z, abs));
+        const __m256d usable = c.parallel ? _mm256_castsi256_pd(_mm256_set1_epi64x(-1))
+                                          : _mm256_cmp_pd(den, _mm256_mul_pd(lanes(CameraRays::PixelMap::kMinDen), size), _CMP_GT_OQ);
+        const __m256d col = _mm256_div_pd(_mm256_add_pd(dot3(map_.col, x, y, z), lanes(map_.col0)), den);
+        const __m256d row = _mm256_div_pd(_mm256_add_pd(dot3(map_.row, x, y, z), lanes(map_.row0)), den);
+        __m128 out[4] = {_mm256_cvtpd_ps(_mm256_and_pd(col, usable)), _mm256_cvtpd_ps(_mm256_and_pd(row, usable)),
+                         _mm256_cvtpd_ps(depth), _mm256_cvtpd_ps(_mm256_andnot_pd(usable, lanes(1.0)))};
+        _MM_TRANSPOSE4_PS(out[0], out[1], out[2], out[3]);  // (column, row, depth, flag) per point
+        for (int k = 0; k < 4; ++k) _mm_store_ps(points_ + 4 * (i + k), out[k]);
+    }
+#endif
 #if defined(__SSE4_1__)
     /// The rectangle (c0, c1, r0, r1) and nearest depth of projected points whose
     /// (column, row, depth, flag) lie within [lo, hi], without branches (selects instead:
