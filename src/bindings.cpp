@@ -206,7 +206,7 @@ NB_MODULE(_core, m) {
         .def_prop_ro("n_triangles", &vrc::Scene::n_triangles)
         .def_prop_ro("n_nodes", [](const vrc::Scene& s) { return s.nodes.size(); })
         .def_prop_ro("memory_bytes", &vrc::Scene::memory_bytes,
-                     "Bytes held by the BVH, the triangles and the points.");
+                     "Bytes held by the BVH, the triangles, the points and the memory kept for camera casts.");
     m.attr("max_binned_pixels") = vrc::ImageRect::kMaxPixels;  // widest image a scene without a BVH casts
     bind_precision<double>(m);
     bind_precision<float>(m);

@@ -87,7 +87,7 @@ class TileTracer {
     void trace(std::size_t tile, Store&& store) {
         const CameraRays::TilePixels t = rays_.tile_pixels(tile);
         const uint32_t entry = rays_.tile_may_hit(tile) && !scene_.nodes.empty() ? entry_node(t) : kNoNode;
-        if (entry == kNoNode) {  // nothing in the tile's frustum: misses, no rays made
+        if (entry == kNoNode) {  // no node's rectangle meets the tile: misses, no rays made
             const int64_t nx = int64_t(rays_.spec().nx);
             for (int64_t r = t.r0; r <= t.r1; ++r)
                 for (int64_t i = t.i0; i <= t.i1; ++i) store(std::size_t(i + r * nx), Ray{}, Hit<Real>{});
@@ -120,8 +120,8 @@ class TileTracer {
     static constexpr uint32_t kNoNode = UINT32_MAX;
 
     /// The tile's entry point (Reshetov et al. 2005): the deepest node whose subtree holds
-    /// every node the tile's frustum meets, so its packets skip the levels above; kNoNode
-    /// when the frustum meets none.
+    /// every node whose rectangle meets the tile, so its packets skip the levels above;
+    /// kNoNode when none does.
     uint32_t entry_node(const CameraRays::TilePixels& t) {
         if (!overlaps(t, projected_.node(0).rect)) return kNoNode;
         uint32_t current = 0;

@@ -1,10 +1,11 @@
 """Camera casts go through the BVH a packet of pixels at a time, culling nodes against the
-packet's frustum and depth and testing each triangle only on the pixels its projection can
-cover (src/traverse_tile.hpp); without a BVH (``bvh=False``, the one-shot ``vrc.cast``)
-the triangles are binned to the tiles their projection touches (src/bin_triangles.hpp).
-``Scene.intersect`` on the same rays traverses the BVH ray by ray. All call the same
-ray-triangle test, so every pixel must agree exactly: any pixel a tile path wrongly culled
-would show here as a miss or a farther triangle."""
+packet's pixels and depths (with each node's image rectangle, src/projected_scene.hpp) and
+testing each triangle only on the pixels its projection can cover (src/traverse_tile.hpp);
+without a BVH (``bvh=False``, the one-shot ``vrc.cast``) the triangles are binned to the
+tiles their projection touches (src/bin_triangles.hpp). ``Scene.intersect`` on the same
+rays traverses the BVH ray by ray. All call the same ray-triangle test, so every pixel must
+agree exactly: any pixel a tile path wrongly culled would show here as a miss or a farther
+triangle."""
 
 from __future__ import annotations
 

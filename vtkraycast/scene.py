@@ -115,7 +115,9 @@ class Scene:
 
     @property
     def memory_bytes(self) -> int:
-        """Bytes held by the BVH (if any), the triangles and the points in the native core."""
+        """Bytes held in the native core: the BVH (if any), the triangles and the points, and
+        the working memory kept from camera casts for the next one (16 bytes per point and per
+        BVH node, once the scene has been cast)."""
         return int(self._core.memory_bytes)
 
     @property
