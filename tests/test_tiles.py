@@ -180,3 +180,21 @@ def test_model_outside_the_depth_range(parallel):
     for cam in (base.replace(look_at=(0, 0, 6)), base.replace(near=4.5), base.replace(far=1.5)):
         assert assert_same_as_ray_by_ray(scene, cam) == 0
     assert assert_same_as_ray_by_ray(scene, base.replace(near=2.5, far=3.5)) > 10
+
+
+def test_concurrent_casts_on_one_scene():
+    """Casts release the GIL, so Python threads may cast one scene at once: each borrows
+    its own working memory from the scene, and every image equals the same cast run alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    mesh = bumpy_sphere(4)
+    scene = vrc.Scene(mesh)
+    cams = [around(mesh, view=v, nx=150, ny=110) for v in ("iso", "xy", "xz", "yz", "-z", "+x")]
+    alone = [scene.cast(c, arrays=["TriangleId", "Depth"], threads=1) for c in cams]
+    with ThreadPoolExecutor(4) as pool:
+        together = list(pool.map(lambda c: scene.cast(c, arrays=["TriangleId", "Depth"], threads=1), cams * 3))
+    for k, image in enumerate(together):
+        np.testing.assert_array_equal(image["TriangleId"], alone[k % len(cams)]["TriangleId"])
+        np.testing.assert_array_equal(image["Depth"], alone[k % len(cams)]["Depth"])
+    kept = 16 * (mesh.n_points + scene._core.n_nodes)
+    assert scene.memory_bytes - vrc.Scene(mesh).memory_bytes in range(kept, 4 * kept + 1, kept)
