@@ -120,37 +120,33 @@ class CameraRays {
     [[nodiscard]] const CameraSpec& spec() const { return c_; }
 
     /// The seed's bounding-volume test, per tile: project the scene's box (given relative to
-    /// `anchor`) into the image and
-    /// keep the pixel rectangle that can see it (a pixel of margin covers rounding). Tiles
+    /// `anchor`) into the image and keep the pixel rectangle that can see it (a pixel of margin covers rounding). Tiles
     /// outside it are misses without traversal. A box wholly outside the depth range (behind
     /// the eye, say) leaves no tile; one reaching behind a pinhole eye's plane cannot be
     /// projected: then every tile stays.
     void restrict_to(const Box& box, const double anchor[3]) {
         const auto none = [this] { i_lo_ = r_lo_ = INT64_MAX / 2, i_hi_ = r_hi_ = INT64_MIN / 2; };  // meets no tile
         if (!(box.lo[0] <= box.hi[0])) return none();  // empty scene: nothing can be hit
-        double near_depth = HUGE_VAL, far_depth = -HUGE_VAL, size = 0;
+        double rel[8][3], depth[8], near_depth = HUGE_VAL, far_depth = -HUGE_VAL, size = 0;
         for (int corner = 0; corner < 8; ++corner) {
-            double rel[3];
+            double* q = rel[corner];
             for (int k = 0; k < 3; ++k)
-                rel[k] = (anchor[k] - c_.eye[k]) + double((corner >> k & 1) ? box.hi[k] : box.lo[k]);
-            const double depth = -(rel[0] * c_.w[0] + rel[1] * c_.w[1] + rel[2] * c_.w[2]);
-            near_depth = std::min(near_depth, depth), far_depth = std::max(far_depth, depth);
-            size = std::max(size, std::fabs(rel[0]) + std::fabs(rel[1]) + std::fabs(rel[2]));
+                q[k] = (anchor[k] - c_.eye[k]) + double((corner >> k & 1) ? box.hi[k] : box.lo[k]);
+            depth[corner] = -(q[0] * c_.w[0] + q[1] * c_.w[1] + q[2] * c_.w[2]);
+            near_depth = std::min(near_depth, depth[corner]), far_depth = std::max(far_depth, depth[corner]);
+            size = std::max(size, std::fabs(q[0]) + std::fabs(q[1]) + std::fabs(q[2]));
         }
         const double slack = 1e-9 * size;  // far above the rounding of these depths
         if (far_depth + slack < c_.near || near_depth - slack > c_.far) return none();
         double lo_i = HUGE_VAL, hi_i = -HUGE_VAL, lo_r = HUGE_VAL, hi_r = -HUGE_VAL;
         for (int corner = 0; corner < 8; ++corner) {
-            double rel[3];
-            for (int k = 0; k < 3; ++k)
-                rel[k] = (anchor[k] - c_.eye[k]) + double((corner >> k & 1) ? box.hi[k] : box.lo[k]);
-            double x = rel[0] * c_.u[0] + rel[1] * c_.u[1] + rel[2] * c_.u[2];
-            double y = rel[0] * c_.v[0] + rel[1] * c_.v[1] + rel[2] * c_.v[2];
+            const double* q = rel[corner];
+            double x = q[0] * c_.u[0] + q[1] * c_.u[1] + q[2] * c_.u[2];
+            double y = q[0] * c_.v[0] + q[1] * c_.v[1] + q[2] * c_.v[2];
             if (!c_.parallel) {
-                const double depth = -(rel[0] * c_.w[0] + rel[1] * c_.w[1] + rel[2] * c_.w[2]);
-                if (!(depth > 1e-9 * (std::fabs(x) + std::fabs(y)))) return;  // reaches behind the eye
-                x *= c_.d / depth;
-                y *= c_.d / depth;
+                if (!(depth[corner] > 1e-9 * (std::fabs(x) + std::fabs(y)))) return;  // reaches behind the eye
+                x *= c_.d / depth[corner];
+                y *= c_.d / depth[corner];
             }
             // pixel coordinates: column i, and row r counted from the bottom
             const double i = (x + c_.width * 0.5) / (c_.width / double(c_.nx)) - 0.5;
@@ -164,7 +160,9 @@ class CameraRays {
     }
 
     /// Whether any pixel of the image may see the scene (see restrict_to).
-    [[nodiscard]] bool may_hit() const { return i_lo_ <= std::min(i_hi_, c_.nx - 1) && r_lo_ <= std::min(r_hi_, c_.ny - 1) && i_hi_ >= 0 && r_hi_ >= 0; }
+    [[nodiscard]] bool may_hit() const {
+        return i_lo_ <= std::min(i_hi_, c_.nx - 1) && r_lo_ <= std::min(r_hi_, c_.ny - 1) && i_hi_ >= 0 && r_hi_ >= 0;
+    }
     /// Whether any pixel of the tile may see the scene (see restrict_to).
     [[nodiscard]] bool tile_may_hit(std::size_t tile) const {
         const TilePixels p = tile_pixels(tile);
