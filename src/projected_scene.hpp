@@ -6,6 +6,7 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -67,6 +68,7 @@ class ProjectedScene {
         if (!memory_.used)  // the links (as the BVH's) stay from one cast to the next
             for (std::size_t i = 0; i < n_nodes; ++i) node_[i].index = scene.nodes[i].index, node_[i].count = scene.nodes[i].count;
         memory_.used = true;
+        if (n_nodes > 0) plan_subtrees();
         const CameraSpec& c = rays.spec();
         double depth_size = 0, parallel_size = std::fabs(map_.col0) + std::fabs(map_.row0);
         for (int k = 0; k < 3; ++k) {
@@ -129,32 +131,23 @@ class ProjectedScene {
         }
     }
 
-    /// Through a BVH, once every point is projected: worker w's share of the leaves (of
-    /// `workers`); once all are done, the inner nodes (`frame_inner`, one worker: a
-    /// sweep from the last node to the first, as every node's children follow it).
-    void frame_leaves(unsigned w, unsigned workers) {
-        const std::size_t n = scene_.nodes.size();
-        for (std::size_t i = n * w / workers, end = n * (w + 1) / workers; i < end; ++i)
-            if (node_[i].count != 0) node_[i].rect = leaf(node_[i].index, node_[i].count);
-    }
-    void frame_inner() {
-        for (std::size_t i = scene_.nodes.size(); i-- > 0;) {
-            if (node_[i].count != 0) continue;
-            const ProjectedNode* child = node_ + node_[i].index;
-#if defined(__SSE4_1__)
-            // both children in two loads: min c0, r0 and max c1, r1 (16-bit lanes), min
-            // near (float lane 2), the node's own links (lane 3)
-            const __m128i a = _mm_loadu_si128(reinterpret_cast<const __m128i*>(child));
-            const __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(child + 1));
-            const __m128 pixels = _mm_castsi128_ps(_mm_blend_epi16(_mm_min_epu16(a, b), _mm_max_epu16(a, b), 0b1010));
-            __m128 joined = _mm_blend_ps(pixels, _mm_min_ps(_mm_castsi128_ps(a), _mm_castsi128_ps(b)), 0b0100);
-            joined = _mm_blend_ps(joined, _mm_loadu_ps(reinterpret_cast<const float*>(node_ + i)), 0b1000);
-            _mm_storeu_ps(reinterpret_cast<float*>(node_ + i), joined);
-#else
-            node_[i].rect = child[0].rect;
-            node_[i].rect.join(child[1].rect);
-#endif
+    /// Through a BVH, once every point is projected, the node rectangles: whole subtrees
+    /// (`frame_subtrees`, called by every worker: each takes subtrees until none is left),
+    /// then the few nodes above them (`frame_top`, one worker). In a subtree the leaves go
+    /// first, then the inner nodes from last to first, as every node's children follow it.
+    void frame_subtrees() {
+        for (std::size_t k; (k = next_subtree_.fetch_add(1)) < subtrees_.size();) {
+            const Subtree& t = subtrees_[k];
+            for (uint32_t i = t.first; i < t.end; ++i)
+                if (node_[i].count != 0) frame_leaf(i);
+            for (uint32_t i = t.end; i-- > t.first;)
+                if (node_[i].count == 0) join_children(i);
+            if (node_[t.root].count != 0) frame_leaf(t.root);
+            else join_children(t.root);
         }
+    }
+    void frame_top() {
+        for (auto i = top_.rbegin(); i != top_.rend(); ++i) join_children(*i);
     }
 
     enum class Reach { none, rect, unknown };
@@ -270,23 +263,80 @@ class ProjectedScene {
     }
 #endif
 
-    /// A rectangle holding those of triangles [first, first + count).
-    [[nodiscard]] ImageRect leaf(uint32_t first, uint32_t count) const {
-        ImageRect rect = kNoPixels;
+    /// Leaf i's rectangle: that of all its points, which holds each triangle's at a third
+    /// of the work.
+    void frame_leaf(uint32_t i) {
+        const uint32_t *p = scene_.triangles.data() + 3 * std::size_t(node_[i].index), *end = p + 3 * node_[i].count;
 #if defined(__SSE4_1__)
-        // the rectangle of all their points: it holds each triangle's, at a third of the work
         __m128 lo = _mm_set1_ps(HUGE_VALF), hi = _mm_set1_ps(-HUGE_VALF);
-        for (const uint32_t *p = scene_.triangles.data() + 3 * std::size_t(first), *end = p + 3 * count; p != end; ++p) {
+        for (; p != end; ++p) {
             const __m128 v = _mm_load_ps((*this)[*p]);
             lo = _mm_min_ps(lo, v);
             hi = _mm_max_ps(hi, v);
         }
-        store(rect4(lo, hi, rect.near), rect);
+        store(rect4(lo, hi, node_[i].rect.near), node_[i].rect);
 #else
-        for (uint32_t i = first; i < first + count; ++i) rect.join(triangle(i));
+        ImageRect rect = kNoPixels, t;
+        for (; p != end; p += 3) {
+            (void)frame_triangle(p, t);
+            rect.join(t);
+        }
+        node_[i].rect = rect;
 #endif
-        return rect;
     }
+
+    /// Inner node i's rectangle: the join of its children's.
+    void join_children(uint32_t i) {
+        const ProjectedNode* child = node_ + node_[i].index;
+#if defined(__SSE4_1__)
+        // both children in two loads: min c0, r0 and max c1, r1 (16-bit lanes), min near
+        // (float lane 2), the node's own links (lane 3)
+        const __m128i a = _mm_loadu_si128(reinterpret_cast<const __m128i*>(child));
+        const __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(child + 1));
+        const __m128 pixels = _mm_castsi128_ps(_mm_blend_epi16(_mm_min_epu16(a, b), _mm_max_epu16(a, b), 0b1010));
+        __m128 joined = _mm_blend_ps(pixels, _mm_min_ps(_mm_castsi128_ps(a), _mm_castsi128_ps(b)), 0b0100);
+        joined = _mm_blend_ps(joined, _mm_loadu_ps(reinterpret_cast<const float*>(node_ + i)), 0b1000);
+        _mm_storeu_ps(reinterpret_cast<float*>(node_ + i), joined);
+#else
+        node_[i].rect = child[0].rect;
+        node_[i].rect.join(child[1].rect);
+#endif
+    }
+
+    /// Splits the hierarchy into subtrees for `frame_subtrees`: the largest is split until
+    /// there are enough to share among workers, or it is a leaf. The nodes split off are
+    /// `top_`, parents before children. Relies on the builder's layout (sibling pairs,
+    /// depth first): an inner node's descendants are one block, from its children to the
+    /// last pair of its rightmost inner descendant.
+    void plan_subtrees() {
+        const auto subtree = [this](uint32_t root) {
+            const std::vector<Node>& nodes = scene_.nodes;
+            if (nodes[root].is_leaf()) return Subtree{root, root, root};
+            uint32_t last = nodes[root].index;  // the last pair of the block
+            for (uint32_t i = root; !nodes[i].is_leaf();) {
+                last = nodes[i].index;
+                if (!nodes[last + 1].is_leaf()) i = last + 1;  // the right child's block ends it
+                else if (!nodes[last].is_leaf()) i = last;     // else the left child's
+                else break;
+            }
+            return Subtree{root, nodes[root].index, last + 2};
+        };
+        const auto size = [](const Subtree& t) { return t.end - t.first; };
+        const auto smaller = [&](const Subtree& a, const Subtree& b) { return size(a) < size(b); };
+        subtrees_ = {subtree(0)};
+        while (subtrees_.size() < kSubtrees && size(subtrees_.front()) > 0) {
+            std::pop_heap(subtrees_.begin(), subtrees_.end(), smaller);
+            const uint32_t root = subtrees_.back().root, left = scene_.nodes[root].index;
+            top_.push_back(root);
+            subtrees_.back() = subtree(left);
+            std::push_heap(subtrees_.begin(), subtrees_.end(), smaller);
+            subtrees_.push_back(subtree(left + 1));
+            std::push_heap(subtrees_.begin(), subtrees_.end(), smaller);
+        }
+        std::sort_heap(subtrees_.begin(), subtrees_.end(), smaller);
+        std::reverse(subtrees_.begin(), subtrees_.end());  // largest first
+    }
+
 
     /// x rounded up to single precision.
     static float up(double x) {
@@ -302,6 +352,14 @@ class ProjectedScene {
     ProjectedNode* node_;
     double to_anchor_[3], reach_[3], depth_slack_;
     float margin_, slack_, near_, far_;  // in single precision: see the constructor
+    /// A subtree: its root, then its other nodes [first, end) (empty for a leaf).
+    struct Subtree {
+        uint32_t root, first, end;
+    };
+    static constexpr std::size_t kSubtrees = 64;  // enough to balance a few dozen workers
+    std::vector<Subtree> subtrees_;
+    std::vector<uint32_t> top_;
+    std::atomic<std::size_t> next_subtree_{0};
 #if defined(__SSE4_1__)
     __m128 margin4_, floor4_, ceil4_, any4_, none4_;  // per lane of (c0, c1, r0, r1)
 #endif

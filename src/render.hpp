@@ -73,9 +73,9 @@ struct CameraCast {
         projected.project(w, workers);
         barrier.wait();
         if (!bins) {
-            projected.frame_leaves(w, workers);
+            projected.frame_subtrees();
             barrier.wait();
-            if (w == 0) projected.frame_inner();
+            if (w == 0) projected.frame_top();
             barrier.wait();
             return {};
         }
