@@ -821,7 +821,8 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
 
     // Final layout: the order in which a sequential build allocates nodes (sibling pairs,
     // depth first). A subtree's root goes where its parent put it, the rest of it in one
-    // block (local node i >= 1 at base + i - 1).
+    // block (local node i >= 1 at base + i - 1). Camera casts rely on this: every subtree
+    // is one block (ProjectedScene::plan_subtrees).
     if (subtrees.size() == 1) {  // one thread: the subtree is the whole tree, laid out already
         scene.nodes = std::move(subtrees[0]);
     } else {

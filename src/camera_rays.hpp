@@ -120,8 +120,8 @@ class CameraRays {
     [[nodiscard]] const CameraSpec& spec() const { return c_; }
 
     /// The seed's bounding-volume test, per tile: project the scene's box (given relative to
-    /// `anchor`) into the image and keep the pixel rectangle that can see it (a pixel of margin covers rounding). Tiles
-    /// outside it are misses without traversal. A box wholly outside the depth range (behind
+    /// `anchor`) into the image and keep the pixel rectangle that can see it (a pixel of
+    /// margin covers rounding). Tiles outside it are misses without traversal. A box wholly outside the depth range (behind
     /// the eye, say) leaves no tile; one reaching behind a pinhole eye's plane cannot be
     /// projected: then every tile stays.
     void restrict_to(const Box& box, const double anchor[3]) {

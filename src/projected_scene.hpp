@@ -312,13 +312,13 @@ class ProjectedScene {
         const auto subtree = [this](uint32_t root) {
             const std::vector<Node>& nodes = scene_.nodes;
             if (nodes[root].is_leaf()) return Subtree{root, root, root};
-            uint32_t last = nodes[root].index;  // the last pair of the block
-            for (uint32_t i = root; !nodes[i].is_leaf();) {
+            // the block ends with the children of the last inner node on the way down that
+            // takes the right child when it is inner, else the left one
+            uint32_t i = root, last;
+            do {
                 last = nodes[i].index;
-                if (!nodes[last + 1].is_leaf()) i = last + 1;  // the right child's block ends it
-                else if (!nodes[last].is_leaf()) i = last;     // else the left child's
-                else break;
-            }
+                i = nodes[last + 1].is_leaf() ? last : last + 1;
+            } while (!nodes[i].is_leaf());
             return Subtree{root, nodes[root].index, last + 2};
         };
         const auto size = [](const Subtree& t) { return t.end - t.first; };
@@ -336,7 +336,6 @@ class ProjectedScene {
         std::sort_heap(subtrees_.begin(), subtrees_.end(), smaller);
         std::reverse(subtrees_.begin(), subtrees_.end());  // largest first
     }
-
 
     /// x rounded up to single precision.
     static float up(double x) {
