@@ -5,8 +5,25 @@
 #include <cstring>
 #include <cstdint>
 #include <limits>
+#if defined(__AVX__)
+#include <immintrin.h>
+#endif
 
 namespace vrc {
+
+/// Four doubles (GCC/Clang vector extension: AVX where the CPU has it, SSE2 otherwise):
+/// lanes of plane or edge tests evaluated at once.
+using Double4 = double __attribute__((vector_size(32)));
+using Mask4 = int64_t __attribute__((vector_size(32)));
+
+/// Whether any lane of a comparison holds.
+inline bool any(Mask4 m) {
+#if defined(__AVX__)
+    return _mm256_movemask_pd(_mm256_castsi256_pd(__m256i(m))) != 0;
+#else
+    return (m[0] | m[1] | m[2] | m[3]) != 0;
+#endif
+}
 
 /// Axis-aligned box in single precision. Stored boxes are rounded outward, so a box
 /// always contains the double-precision triangles it bounds.

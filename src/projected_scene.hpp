@@ -39,6 +39,45 @@ struct ImageRect {
 };
 constexpr ImageRect kNoPixels{uint16_t(ImageRect::kMaxPixels), 0, uint16_t(ImageRect::kMaxPixels), 0, HUGE_VALF};
 
+/// The pixels whose rays may hit a triangle, finer than its rectangle: a pixel centre p
+/// is rejected only when it lies outside the triangle's projection by more than `margin`
+/// (the rectangle's, plus the single-precision rounding of points outside the image).
+/// Why that is safe: the exact projection p* of the pixel's ray lies within the margin of
+/// p, and the triangle's exact projected points A', B', C' within it of the stored A, B, C.
+/// If p* = aA' + bB' + cC' (a, b, c >= 0, summing to 1) then p = aA + bB + cC + e with
+/// |e| <= margin in each coordinate, so the edge function of AB at p is c D + (B - A) x e,
+/// D = (B - A) x (C - A); likewise for BC (a D) and CA (b D). Every edge function is
+/// therefore >= -margin (|x| + |y| of its edge) when D >= 0, or all are <= +that when
+/// D <= 0; a pixel failing both cannot be hit, whatever the triangle's orientation.
+/// Evaluated in double from the stored floats, with a slack for that rounding too.
+/// A triangle with a point of no usable projection keeps every pixel.
+class Footprint {
+   public:
+    Footprint(const float* a, const float* b, const float* c, float margin) : known_(a[3] + b[3] + c[3] == 0) {
+        const float size = std::max(std::max(std::max(std::fabs(a[0]), std::fabs(a[1])), std::max(std::fabs(b[0]), std::fabs(b[1]))),
+                                    std::max(std::fabs(c[0]), std::fabs(c[1])));
+        // stored rounding of points beyond the image (the margin covers those within it),
+        // then that of the edge functions below: under 8 roundings of |edge| |p - A|,
+        // with |p - A| <= 2^16 + size
+        const double m = double(margin) + 0x1p-23 * double(size) + 0x1p-49 * std::max(double(size), 65536.0);
+        x_ = Double4{a[0], b[0], c[0], a[0]};  // lane k: edge from point k to point k + 1
+        y_ = Double4{a[1], b[1], c[1], a[1]};
+        ex_ = Double4{b[0], c[0], a[0], b[0]} - x_;
+        ey_ = Double4{b[1], c[1], a[1], b[1]} - y_;
+        const Double4 zero{};
+        slack_ = m * ((ex_ < zero ? -ex_ : ex_) + (ey_ < zero ? -ey_ : ey_));
+    }
+    /// Whether the ray of the pixel centred at column x, row y may hit the triangle.
+    [[nodiscard]] bool may_cover(double x, double y) const {
+        const Double4 e = ex_ * (y - y_) - ey_ * (x - x_);
+        return !known_ || !(any(e < -slack_) && any(e > slack_));
+    }
+
+   private:
+    Double4 x_, y_, ex_, ey_, slack_;
+    bool known_;
+};
+
 /// A BVH node as a camera cast traverses it: its image rectangle beside its links (as in
 /// Node), 16 bytes, so a node's children are tested and entered from one cache line
 /// without touching the BVH's own boxes.
@@ -194,6 +233,12 @@ class ProjectedScene {
         ImageRect rect;
         (void)frame_triangle(scene_.triangles.data() + 3 * std::size_t(i), rect);
         return rect;
+    }
+
+    /// Triangle i's footprint (leaf order; see Footprint).
+    [[nodiscard]] Footprint footprint(uint32_t i) const {
+        const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
+        return Footprint((*this)[tri[0]], (*this)[tri[1]], (*this)[tri[2]], margin_);
     }
 
     /// Column, row and depth of point i, and 1 when it has no usable projection (else 0).

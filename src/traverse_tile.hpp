@@ -17,30 +17,12 @@
 #include <limits>
 #include <optional>
 #include <vector>
-#if defined(__AVX__)
-#include <immintrin.h>
-#endif
-
 #include "camera_rays.hpp"
 #include "bin_triangles.hpp"
 #include "projected_scene.hpp"
 #include "traverse.hpp"
 
 namespace vrc {
-
-/// Four doubles (GCC/Clang vector extension: AVX where the CPU has it, SSE2 otherwise):
-/// the tile's four side planes evaluated at once.
-using Double4 = double __attribute__((vector_size(32)));
-using Mask4 = int64_t __attribute__((vector_size(32)));
-
-/// Whether any lane of a comparison holds.
-inline bool any(Mask4 m) {
-#if defined(__AVX__)
-    return _mm256_movemask_pd(_mm256_castsi256_pd(__m256i(m))) != 0;
-#else
-    return (m[0] | m[1] | m[2] | m[3]) != 0;
-#endif
-}
 
 /// Pixels [c0, c1] x [r0, r1] of a block, in its own coordinates (inclusive), and a lower
 /// bound on the depth of what is there to hit.
@@ -282,10 +264,12 @@ class TileTracer {
 
     /// Tests triangle i on the block's pixels in `rect`.
     void test_pixels(uint32_t i, const PixelRect& rect) {
+        const Footprint footprint = projected_.footprint(i);
         for (int64_t r = rect.r0; r <= rect.r1; ++r)
             for (int64_t c = rect.c0; c <= rect.c1; ++c) {
                 const int64_t j = c + r * kStride;
                 if (rect.near > depth_bound_[j]) continue;  // beyond this ray's hit
+                if (!footprint.may_cover(double(i0_ + c), double(r0_ + r))) continue;
                 if (!kernel_[j]) make_ray(j);
                 const double before = bound_[j];
                 test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);

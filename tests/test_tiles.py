@@ -93,11 +93,18 @@ def test_eye_inside_a_closed_mesh(offset):
     assert assert_same_as_ray_by_ray(vrc.Scene(star_mesh(cam)), cam) == 33 * 25
 
 
-def test_rays_through_vertices_and_edges():
-    # A parallel camera whose pixel centres land on the grid's vertices and edges.
+@pytest.mark.parametrize(("centre", "pixel", "n"), [(4.0, 0.25, 32), (4.5, 2.0**-25, 30)])
+def test_rays_through_vertices_and_edges(centre, pixel, n):
+    # Cameras whose pixel centres land on the grid's vertices and edges. Zoomed in, the
+    # centres still lie exactly on a diagonal edge, whose points project 2^24 pixels away,
+    # to columns and rows that single precision rounds by half a pixel, both the same way
+    # (the footprint that keeps a triangle's pixels must allow for that rounding).
     mesh = integer_grid(8)
-    cam = vrc.Camera((4, 4, 10), (4, 4, 0), (0, 1, 0), parallel=True, w=16, h=16, nx=32, ny=32)
-    assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam) > 0
+    eye, target = (centre, centre, 10), (centre, centre, 0)
+    cam = vrc.Camera(eye, target, (0, 1, 0), parallel=True, w=n * pixel, h=n * pixel, nx=n, ny=n)
+    assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam) == n * n
+    cam = vrc.Camera(eye, target, (0, 1, 0), d=10, w=n * pixel, h=n * pixel, nx=n, ny=n)
+    assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam) == n * n
 
 
 def test_near_far_and_view_angles():
