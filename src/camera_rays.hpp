@@ -31,7 +31,10 @@ class CameraRays {
     [[nodiscard]] std::size_t size() const { return std::size_t(c_.nx) * std::size_t(c_.ny); }
 
     [[nodiscard]] Ray ray(std::size_t pixel) const {
-        const int64_t i = int64_t(pixel % std::size_t(c_.nx)), r = int64_t(pixel / std::size_t(c_.nx));
+        return ray(int64_t(pixel % std::size_t(c_.nx)), int64_t(pixel / std::size_t(c_.nx)));
+    }
+    /// The ray of pixel column i, row r.
+    [[nodiscard]] Ray ray(int64_t i, int64_t r) const {
         const int64_t j = c_.ny - 1 - r;
         const double x = -c_.width * 0.5 + c_.width / double(c_.nx) * (double(i) + 0.5);
         const double y = c_.height * 0.5 - c_.height / double(c_.ny) * (double(j) + 0.5);

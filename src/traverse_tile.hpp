@@ -282,7 +282,7 @@ class TileTracer {
     }
 
     void make_ray(int64_t j) {
-        ray_[j] = rays_.ray(pixel(j));
+        ray_[j] = rays_.ray(i0_ + j % kStride, r0_ + j / kStride);
         kernel_[j].emplace(ray_[j], context_);
         bound_[j] = ray_[j].tmax;  // t; depth_bound_ stays unbounded until a hit
         scale_[j] = dot(map_.depth, ray_[j].dir);  // depth per unit of t
