@@ -37,7 +37,7 @@ namespace {
 
 constexpr int kBins = 16;
 constexpr uint32_t kMaxLeaf = 8;        // forced split above this many triangles
-constexpr float kTraversalCost = 2.0f;  // SAH cost of a node visit, in triangle tests (frog: 2 builds ~15 % faster than 1, 20 % less memory)
+constexpr float kTraversalCost = 4.0f;  // SAH cost of a node visit, in triangle tests (frog: 4 over 2, camera casts ~9 % fewer instructions, 24 % less memory; 8 as 4)
 constexpr uint32_t kMinTopNode = 1u << 15;  // smallest node binned/partitioned by all threads together
 constexpr int kMaxSahDepth = 64;  // below this, median splits: depth stays < 96 (traversal stack 128)
 
@@ -895,7 +895,7 @@ namespace {
 
 constexpr int kBins = 16;
 constexpr uint32_t kMaxLeaf = 8;             // forced split above this many triangles
-constexpr float kTraversalCost = 2.0f;  // SAH cost of a node visit, in triangle tests (frog: 2 builds ~15 % faster than 1, 20 % less memory)
+constexpr float kTraversalCost = 4.0f;  // SAH cost of a node visit, in triangle tests (frog: 4 over 2, camera casts ~9 % fewer instructions, 24 % less memory; 8 as 4)
 constexpr std::size_t kParallelGrain = 1u << 14;  // do not hand smaller subtrees to a new thread
 constexpr int kMaxSahDepth = 64;  // below this, median splits: depth stays < 96 (traversal stack 128)
 
