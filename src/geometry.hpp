@@ -101,7 +101,8 @@ struct Ray {
     /// [1, 2), with tmin, tmax and the output scale to match: directions of any magnitude,
     /// from subnormal to huge, then meet the kernels with no overflow in 1/d or the shear.
     void normalize_direction() {
-        const double m = std::fmax(std::fabs(dir[0]), std::fmax(std::fabs(dir[1]), std::fabs(dir[2])));
+        const double x = std::fabs(dir[0]), y = std::fabs(dir[1]), z = std::fabs(dir[2]);
+        const double m = x > y ? (x > z ? x : z) : (y > z ? y : z);  // not std::fmax: a libm call, and no NaN comes here
         if (!(m > 0) || !std::isfinite(m)) return;
         if (m >= 0x1p-500 && m < 0x1p500) {
             // The common case without libm calls (they showed in profiles): the exponent from

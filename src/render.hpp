@@ -31,8 +31,8 @@ struct Outputs {
     Real* barycentric;     ///< (n, 3) weights of the triangle's points, NaN on a miss
 };
 
-/// Called about every 50 ms from the calling thread with (tiles done, tiles total);
-/// returning false aborts the cast between tiles.
+/// Called from the calling thread with (tiles done, tiles total) as the cast starts, then
+/// about every 50 ms; returning false aborts the cast between tiles.
 using Poll = std::function<bool(std::size_t, std::size_t)>;
 
 /// Every worker waits here until all have arrived (spinning with yields: it separates
@@ -157,6 +157,7 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
             tile_done();
         }
     };
+    if (poll && !poll(0, n_tiles)) return false;  // so even a cast too short for a second call can be stopped
     std::vector<std::thread> workers;
     for (unsigned w = 0; w < n_workers; ++w) workers.emplace_back(work, w);
     {

@@ -106,9 +106,12 @@ def test_progress_is_reported_and_can_abort():
         calls.append((done, total))
 
     scene.cast(camera(nx=1500, ny=1500), arrays=["TriangleId"], progress=progress, threads=1)
-    assert calls and all(0 <= d <= t for d, t in calls)
-    with pytest.raises(InterruptedError, match="aborted"):
-        scene.cast(camera(nx=1500, ny=1500), arrays=["TriangleId"], progress=lambda d, t: False, threads=1)
+    total = calls[0][1]
+    assert calls[0] == (0, total) and all(0 <= d <= t == total for d, t in calls)
+    # called as the cast starts, so even a short cast can be stopped
+    for nx in (1500, 8):
+        with pytest.raises(InterruptedError, match="aborted"):
+            scene.cast(camera(nx=nx, ny=nx), arrays=["TriangleId"], progress=lambda d, t: False, threads=1)
 
 
 def test_an_exception_in_the_progress_callback_reaches_the_caller(scene):

@@ -214,8 +214,8 @@ class Scene:
         interpolate : bool, default: True
             Include the mesh's point arrays (interpolated) and cell arrays by default.
         progress : callable, optional
-            Called as ``progress(tiles_done, tiles_total)`` about every 50 ms; returning
-            False aborts the cast (``InterruptedError``). Ctrl-C stops a cast too
+            Called as ``progress(tiles_done, tiles_total)`` as the cast starts, then about
+            every 50 ms; returning False aborts the cast (``InterruptedError``). Ctrl-C stops a cast too
             (``KeyboardInterrupt``), between tiles.
         progress_bar : bool, default: False
             Show a progress bar on the terminal (needs ``tqdm``).
