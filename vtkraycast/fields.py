@@ -88,12 +88,19 @@ def compute_arrays(
     depth: np.ndarray | None,
     barycentric: np.ndarray | None,
 ) -> dict[str, np.ndarray]:
-    """The arrays ``names`` for hits ``triangle_id`` (-1 = miss), as flat per-ray arrays."""
-    hit = triangle_id >= 0
-    hit_ids = triangle_id[hit]
+    """The arrays ``names`` for hits ``triangle_id`` (-1 = miss), as flat per-ray arrays.
+    Per-hit data is gathered only for the arrays that need it: the hit triangles' corners
+    alone took 10 ms of a 50 ms frog re-cast (1024x1024) that asked for TriangleId only."""
     real = barycentric.dtype if barycentric is not None else (depth.dtype if depth is not None else np.float64)
     point_arrays, cell_arrays = _mesh_arrays(mesh)
-    corners = mesh.triangles[hit_ids].astype(np.int64) if (hit_ids.size and len(names)) else np.zeros((0, 3), np.int64)
+    own = {"TriangleId": triangle_id, "Barycentric": barycentric, "Depth": depth}
+    if all(name in own for name in names):
+        return {name: own[name] for name in names}
+    hit = triangle_id >= 0
+    hit_ids = triangle_id[hit]
+    corners = np.zeros((0, 3), np.int64)
+    if hit_ids.size and any(name in ("Position", "Normal") or name in point_arrays for name in names):
+        corners = mesh.triangles[hit_ids].astype(np.int64)
     weights = barycentric[hit].astype(np.float64) if barycentric is not None else None
     out: dict[str, np.ndarray] = {}
 
@@ -103,14 +110,10 @@ def compute_arrays(
         return full
 
     for name in names:
-        if name == "TriangleId":
-            out[name] = triangle_id
+        if name in own:
+            out[name] = own[name]
         elif name == "CellId":
             out[name] = np.where(hit, mesh.cell_ids[np.maximum(triangle_id, 0)] if mesh.n_triangles else -1, -1)
-        elif name == "Barycentric":
-            out[name] = barycentric
-        elif name == "Depth":
-            out[name] = depth
         elif name == "vtkValidPointMask":
             out[name] = hit.astype(np.uint8)
         elif name == "Position":
