@@ -17,6 +17,7 @@
 #include <limits>
 #include <optional>
 #include <vector>
+
 #include "camera_rays.hpp"
 #include "bin_triangles.hpp"
 #include "projected_scene.hpp"
