@@ -166,6 +166,13 @@ class CameraRays {
     [[nodiscard]] bool may_hit() const {
         return i_lo_ <= std::min(i_hi_, c_.nx - 1) && r_lo_ <= std::min(r_hi_, c_.ny - 1) && i_hi_ >= 0 && r_hi_ >= 0;
     }
+    /// How many pixels may see the scene (see restrict_to).
+    [[nodiscard]] std::size_t pixels_may_hit() const {
+        if (!may_hit()) return 0;
+        const int64_t i0 = std::max<int64_t>(i_lo_, 0), i1 = std::min(i_hi_, c_.nx - 1);
+        const int64_t r0 = std::max<int64_t>(r_lo_, 0), r1 = std::min(r_hi_, c_.ny - 1);
+        return std::size_t(i1 - i0 + 1) * std::size_t(r1 - r0 + 1);
+    }
     /// Whether any pixel of the tile may see the scene (see restrict_to).
     [[nodiscard]] bool tile_may_hit(std::size_t tile) const {
         const TilePixels p = tile_pixels(tile);

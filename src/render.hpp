@@ -66,6 +66,18 @@ struct CameraCast {
     static bool fits(const CameraSpec& c) { return c.nx <= ImageRect::kMaxPixels && c.ny <= ImageRect::kMaxPixels; }
     /// Whether the BVH's nodes fit the projected nodes' 28-bit links (else ray by ray).
     static bool fits(const Scene& scene) { return scene.nodes.size() < ProjectedNode::kMaxNodes; }
+    /// Whether the preparation (every point and node, once per camera) pays off through a
+    /// BVH: not when few pixels may see a large scene, which then go ray by ray. What a
+    /// pixel is worth in prepared elements, from alternated runs (2 threads, noisy): the
+    /// frog contour (1.3 M points and nodes, its box on about a third of a framing view)
+    /// is 1.8x to 3x faster ray by ray at 128x128, about even at 256x256 and 384x384, 1.6x
+    /// slower at 512x512; a bumpy sphere of 330 k triangles filling the frame is even at
+    /// 64x64 and 2x slower ray by ray at 128x128.
+    static constexpr std::size_t kElementsPerPixel = 32;
+    static bool pays(const Scene& scene, const CameraRays& rays) {
+        return !scene.has_bvh() ||
+               kElementsPerPixel * rays.pixels_may_hit() >= scene.points.size() / 3 + scene.nodes.size();
+    }
     /// Worker w's share of the preparation; returns the triangles every tile tests. None
     /// when no pixel may see the scene: every tile is then a miss.
     std::vector<uint32_t> prepare(unsigned w, unsigned workers, const CameraRays& rays) {
@@ -135,7 +147,8 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
     constexpr bool kTiles = std::is_same_v<Rays, CameraRays> && !kBruteForce;
     std::optional<std::conditional_t<kTiles, CameraCast, int>> camera;
     if constexpr (kTiles) {
-        if (CameraCast::fits(rays.spec()) && CameraCast::fits(scene)) camera.emplace(scene, rays, n_workers);
+        if (CameraCast::fits(rays.spec()) && CameraCast::fits(scene) && CameraCast::pays(scene, rays))
+            camera.emplace(scene, rays, n_workers);
     }
     auto work = [&](unsigned w) {
         if constexpr (kTiles) {

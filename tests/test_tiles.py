@@ -116,6 +116,19 @@ def test_near_far_and_view_angles():
     assert assert_same_as_ray_by_ray(scene, vrc.Camera((0.5, 0.1, 0), (1, 0, 0), (0, 0, 1), nx=53, ny=31)) == 53 * 31
 
 
+def test_small_images_of_large_scenes_go_ray_by_ray():
+    """Preparing a camera costs every point and node: a few pixels of a large scene are
+    cheaper ray by ray, so such a cast keeps no preparation memory; more pixels do. Both
+    give the ray-by-ray images."""
+    mesh = bumpy_sphere(6)  # 82 k triangles
+    scene = vrc.Scene(mesh)
+    built = scene.memory_bytes
+    assert compare(scene, scene, around(mesh, nx=16, ny=16)) > 40
+    assert scene.memory_bytes == built
+    assert compare(scene, scene, around(mesh, nx=256, ny=256)) > 10_000
+    assert scene.memory_bytes > built
+
+
 def test_one_triangle_in_a_large_frame():
     mesh = bumpy_sphere(0, scale=1e-3)
     cam = vrc.Camera((0, 0, 5), (0, 0, 0), (0, 1, 0), view_angle=30, nx=301, ny=203)
