@@ -69,10 +69,10 @@ struct CameraCast {
     /// Whether the preparation (every point and node, once per camera) pays off through a
     /// BVH: not when few pixels may see a large scene, which then go ray by ray. What a
     /// pixel is worth in prepared elements, from alternated runs (2 threads, noisy): the
-    /// frog contour (1.3 M points and nodes, its box on about a third of a framing view)
-    /// is 1.8x to 3x faster ray by ray at 128x128, about even at 256x256 and 384x384, 1.6x
-    /// slower at 512x512; a bumpy sphere of 330 k triangles filling the frame is even at
-    /// 64x64 and 2x slower ray by ray at 128x128.
+    /// frog contour (1.3 M points and nodes, in a view that frames it) is 1.8x to 3x
+    /// faster ray by ray at 128x128, about even at 256x256 and 384x384, 1.6x slower at
+    /// 512x512; a bumpy sphere of 330 k triangles filling the frame is even at 64x64 and
+    /// 2x slower ray by ray at 128x128.
     static constexpr std::size_t kElementsPerPixel = 32;
     static bool pays(const Scene& scene, const CameraRays& rays) {
         return !scene.has_bvh() ||
@@ -131,11 +131,11 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
     };
     auto trace_rays = [&](std::size_t tile) {
         // The seed's bounding test, a whole tile at a time: tiles that cannot see the
-        // scene are misses without a single ray traversal.
+        // scene are misses without a single ray made.
         const bool may_hit = rays.tile_may_hit(tile);
         rays.for_each_in_tile(tile, [&](std::size_t k) {
+            if (!may_hit) return store(k, Ray{}, Hit<Real>{});  // (store reads the ray of hits only)
             const Ray ray = rays.ray(k);
-            if (!may_hit) return store(k, ray, Hit<Real>{});
             store(k, ray,
                   kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, context)
                               : closest_hit<Kernel, Real>(scene, ray, context));
