@@ -75,8 +75,8 @@ struct CameraCast {
     /// 2x slower ray by ray at 128x128.
     static constexpr std::size_t kElementsPerPixel = 32;
     static bool pays(const Scene& scene, const CameraRays& rays) {
-        return !scene.has_bvh() ||
-               kElementsPerPixel * rays.pixels_may_hit() >= scene.points.size() / 3 + scene.nodes.size();
+        const std::size_t pixels = rays.pixels_may_hit();  // (none: nothing is prepared)
+        return !scene.has_bvh() || pixels == 0 || kElementsPerPixel * pixels >= scene.points.size() / 3 + scene.nodes.size();
     }
     /// Worker w's share of the preparation; returns the triangles every tile tests. None
     /// when no pixel may see the scene: every tile is then a miss.
