@@ -2,14 +2,15 @@
 """Instructions per ray, counted by valgrind's callgrind: unlike timings, the count repeats
 exactly on a shared, noisy machine, so it measures small changes to the core.
 
-    python benchmarks/instructions.py [--pixels 1024] [--arrays TriangleId] [--scene bvh|flat]
+    python benchmarks/instructions.py [--pixels 1024] [--arrays TriangleId] [--scene bvh|flat] [--functions 5]
 
 The frog contour (1.5 M triangles) is written once to a temporary file; a child process
 under callgrind loads it, builds the scene (not counted; ``--scene flat`` builds no BVH, as
 ``vrc.cast`` does) and casts once from the iso camera of benchmarks/peers.py on one thread.
 Only the cast's worker threads are counted (they run ``vrc::render``; the core keeps its
 symbols for this), which includes the per-camera projection and binning. Prints
-instructions per ray.
+instructions per ray, and with ``--functions N`` the N functions that executed the most
+(callgrind_annotate's self counts: where the instructions go).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ scene.cast(camera, arrays=sys.argv[3].split(","), threads=1)
 """
 
 
-def count(mesh_file: Path, pixels: int, arrays: str, scene: str, workdir: Path) -> int:
+def count(mesh_file: Path, pixels: int, arrays: str, scene: str, workdir: Path, functions: int) -> int:
     out = workdir / "callgrind.out"
     command = [
         "valgrind",
@@ -51,6 +52,10 @@ def count(mesh_file: Path, pixels: int, arrays: str, scene: str, workdir: Path) 
     if run.returncode != 0:
         sys.exit(run.stderr[-3000:])
     totals = re.search(r"^(?:summary|totals): (\d+)", out.read_text(), re.MULTILINE)
+    if functions:
+        annotated = subprocess.run(["callgrind_annotate", str(out)], capture_output=True, text=True).stdout
+        rows = [line for line in annotated.splitlines() if re.match(r"^\s*[\d,]+ \(", line)]
+        print("\n".join(row[:160] for row in rows[1 : functions + 1]))  # rows[0]: the total
     return int(totals.group(1))
 
 
@@ -64,6 +69,7 @@ def main() -> None:
         default="bvh",
         help="cast through the BVH (Scene) or bin to tiles without one (vrc.cast)",
     )
+    parser.add_argument("--functions", type=int, default=0, help="also list the N costliest functions")
     args = parser.parse_args()
     from pyvista import examples
 
@@ -71,7 +77,7 @@ def main() -> None:
         workdir = Path(tmp)
         mesh_file = workdir / "frog.vtp"
         examples.load_frog_tissues().contour_labels().save(mesh_file)
-        instructions = count(mesh_file, args.pixels, args.arrays, args.scene, workdir)
+        instructions = count(mesh_file, args.pixels, args.arrays, args.scene, workdir, args.functions)
     rays = args.pixels**2
     print(
         f"frog contour, {args.scene} scene, {args.pixels}x{args.pixels}, {args.arrays}: {instructions} instructions, "

@@ -124,9 +124,9 @@ class CameraRays {
 
     /// The seed's bounding-volume test, per tile: project the scene's box (given relative to
     /// `anchor`) into the image and keep the pixel rectangle that can see it (a pixel of
-    /// margin covers rounding). Tiles outside it are misses without traversal. A box wholly outside the depth range (behind
-    /// the eye, say) leaves no tile; one reaching behind a pinhole eye's plane cannot be
-    /// projected: then every tile stays.
+    /// margin covers rounding). Tiles outside it are misses without traversal. A box wholly
+    /// outside the depth range (behind the eye, say) leaves no tile; one reaching behind a
+    /// pinhole eye's plane cannot be projected: then every tile stays.
     void restrict_to(const Box& box, const double anchor[3]) {
         const auto none = [this] { i_lo_ = r_lo_ = INT64_MAX / 2, i_hi_ = r_hi_ = INT64_MIN / 2; };  // meets no tile
         if (!(box.lo[0] <= box.hi[0])) return none();  // empty scene: nothing can be hit
@@ -163,15 +163,12 @@ class CameraRays {
     }
 
     /// Whether any pixel of the image may see the scene (see restrict_to).
-    [[nodiscard]] bool may_hit() const {
-        return i_lo_ <= std::min(i_hi_, c_.nx - 1) && r_lo_ <= std::min(r_hi_, c_.ny - 1) && i_hi_ >= 0 && r_hi_ >= 0;
-    }
+    [[nodiscard]] bool may_hit() const { return pixels_may_hit() != 0; }
     /// How many pixels may see the scene (see restrict_to).
     [[nodiscard]] std::size_t pixels_may_hit() const {
-        if (!may_hit()) return 0;
         const int64_t i0 = std::max<int64_t>(i_lo_, 0), i1 = std::min(i_hi_, c_.nx - 1);
         const int64_t r0 = std::max<int64_t>(r_lo_, 0), r1 = std::min(r_hi_, c_.ny - 1);
-        return std::size_t(i1 - i0 + 1) * std::size_t(r1 - r0 + 1);
+        return i0 <= i1 && r0 <= r1 ? std::size_t(i1 - i0 + 1) * std::size_t(r1 - r0 + 1) : 0;
     }
     /// Whether any pixel of the tile may see the scene (see restrict_to).
     [[nodiscard]] bool tile_may_hit(std::size_t tile) const {

@@ -75,7 +75,9 @@ struct CameraCast {
     /// 2x slower ray by ray at 128x128.
     static constexpr std::size_t kElementsPerPixel = 32;
     static bool pays(const Scene& scene, const CameraRays& rays) {
-        const std::size_t pixels = rays.pixels_may_hit();  // (none: nothing is prepared)
+        // (a frame nothing can see stays: the camera path prepares nothing for it and
+        // writes its misses without making rays)
+        const std::size_t pixels = rays.pixels_may_hit();
         return !scene.has_bvh() || pixels == 0 || kElementsPerPixel * pixels >= scene.points.size() / 3 + scene.nodes.size();
     }
     /// Worker w's share of the preparation; returns the triangles every tile tests. None

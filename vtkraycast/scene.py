@@ -215,8 +215,8 @@ class Scene:
             Include the mesh's point arrays (interpolated) and cell arrays by default.
         progress : callable, optional
             Called as ``progress(tiles_done, tiles_total)`` as the cast starts, then about
-            every 50 ms; returning False aborts the cast (``InterruptedError``). Ctrl-C stops a cast too
-            (``KeyboardInterrupt``), between tiles.
+            every 50 ms; returning False aborts the cast (``InterruptedError``). Ctrl-C
+            stops a cast too (``KeyboardInterrupt``), between tiles.
         progress_bar : bool, default: False
             Show a progress bar on the terminal (needs ``tqdm``).
         world_space : bool, default: False
