@@ -1,14 +1,14 @@
-// Coherent camera rays. Through a BVH, each tile finds its entry node, then its 8x8-pixel
-// packets traverse one after another: a node is culled once per packet against the
-// packet's pixels (with the node's image rectangle, projected_scene.hpp) and against the
-// depths its rays still search there, and a leaf's triangles are tested only on the
-// pixels whose centres their projection can cover. On a flat scene (no BVH) a tile takes
-// the triangles binned to it instead (bin_triangles.hpp). The ray-triangle
-// test itself is the per-ray one (test_triangle), so every result equals the ray-by-ray
-// traversal's; only the work of finding candidates is shared. Frustum and occlusion
-// culling of a ray packet follow Reshetov, Soupikov and Hurley, "Multi-level ray tracing
-// algorithm" (SIGGRAPH 2005), and Wald, Boulos and Shirley, "Ray tracing deformable scenes
-// using dynamic bounding volume hierarchies" (ACM TOG 2007).
+// Coherent camera rays. Through a BVH, each tile's rays traverse as one packet from the
+// tile's entry node: a node is culled once per packet against the packet's pixels (with
+// the node's image rectangle, projected_scene.hpp) and against the depths its rays still
+// search there, and a leaf's triangles are tested only on the pixels whose centres their
+// projection can cover. On a flat scene (no BVH) a tile takes the triangles binned to it
+// instead (bin_triangles.hpp). The ray-triangle test itself is the per-ray one
+// (test_triangle), so every result equals the ray-by-ray traversal's; only the work of
+// finding candidates is shared. Frustum and occlusion culling of a ray packet follow
+// Reshetov, Soupikov and Hurley, "Multi-level ray tracing algorithm" (SIGGRAPH 2005), and
+// Wald, Boulos and Shirley, "Ray tracing deformable scenes using dynamic bounding volume
+// hierarchies" (ACM TOG 2007).
 #pragma once
 
 #include <algorithm>
@@ -57,15 +57,10 @@ class TileTracer {
         quad_.assign(n / 4, -HUGE_VAL);
     }
 
-    /// Rays go through the BVH in square packets of kPacket x kPacket pixels: small enough
-    /// that a packet's rays usually all hit and end close in depth (what occlusion culling
-    /// needs), large enough to share the node tests. Frog contour at 1024x1024: 4x4 and
-    /// 16x16 packets were no faster (16x16 about 5 % slower).
-    static constexpr int64_t kPacket = 8;
-    /// Per-pixel arrays hold a whole tile (a flat scene's block), row by row.
+    /// Per-pixel arrays hold a whole tile (a packet, or a flat scene's block), row by row.
     static constexpr int64_t kStride = CameraRays::kTile, kQuads = kStride / 2;
 
-    /// Traces the tile's rays, packet by packet, and calls store(pixel, ray, hit) for each.
+    /// Traces the tile's rays as one packet and calls store(pixel, ray, hit) for each.
     template <class Store>
     void trace(std::size_t tile, Store&& store) {
         const CameraRays::TilePixels t = rays_.tile_pixels(tile);
@@ -76,10 +71,8 @@ class TileTracer {
                 for (int64_t i = t.i0; i <= t.i1; ++i) store(std::size_t(i + r * nx), Ray{}, Hit<Real>{});
             return;
         }
-        start(t);  // the tile's pixels, shared by its packets
-        for (int64_t r = t.r0; r <= t.r1; r += kPacket)
-            for (int64_t i = t.i0; i <= t.i1; i += kPacket)
-                traverse({i, std::min(i + kPacket - 1, t.i1), r, std::min(r + kPacket - 1, t.r1)}, entry);
+        start(t);
+        traverse(t, entry);
         finish(store);
     }
 
@@ -225,7 +218,7 @@ class TileTracer {
         return any(all_out);
     }
 
-    /// The packet's traversal from the tile's entry node: visible children nearest first,
+    /// The tile's traversal from its entry node: visible children nearest first,
     /// a leaf's triangles on the pixels their rectangles cover.
     void traverse(const CameraRays::TilePixels& packet, uint32_t entry) {
         const ProjectedNode* stack[128];
