@@ -43,6 +43,10 @@ struct Scene {
     /// False for a flat scene (triangles but no hierarchy: one camera cast's worth).
     [[nodiscard]] bool has_bvh() const { return !nodes.empty() || prim_ids.empty(); }
     [[nodiscard]] const double* point(uint32_t i) const { return points.data() + 3 * std::size_t(i); }
+    /// Asks the cache for triangle i's points (leaf order), ahead of a kernel reading them.
+    void prefetch_points(uint32_t i) const {
+        for (int k = 0; k < 3; ++k) __builtin_prefetch(point(triangles[3 * std::size_t(i) + k]));
+    }
     /// Bytes held by the structure and the per-triangle data (points included), and the
     /// working memory kept from camera casts.
     [[nodiscard]] std::size_t memory_bytes() const {

@@ -245,6 +245,17 @@ class ProjectedScene {
     [[nodiscard]] const float* operator[](uint32_t i) const { return points_ + 4 * std::size_t(i); }
     /// Through a BVH, node i: its rectangle holds its triangles'.
     [[nodiscard]] const ProjectedNode& node(uint32_t i) const { return node_[i]; }
+    /// Asks the cache for what entering node n reads first: its children, or a leaf's
+    /// triangles (their points' indices).
+    void prefetch(const ProjectedNode& n) const {
+        if (n.count == 0) __builtin_prefetch(node_ + n.index);
+        else __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(n.index));
+    }
+    /// Asks the cache for the projected points of triangles first to first + count - 1.
+    void prefetch_points(uint32_t first, uint32_t count) const {
+        const uint32_t *p = scene_.triangles.data() + 3 * std::size_t(first), *end = p + 3 * count;
+        for (; p != end; ++p) __builtin_prefetch(points_ + 4 * std::size_t(*p));
+    }
     [[nodiscard]] const double* to_anchor() const { return to_anchor_; }  ///< anchor - eye
     [[nodiscard]] const double* reach() const { return reach_; }          ///< box extent from the anchor
     [[nodiscard]] double depth_slack() const { return depth_slack_; }     ///< rounding of any depth

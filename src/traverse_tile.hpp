@@ -219,7 +219,11 @@ class TileTracer {
     }
 
     /// The tile's traversal from its entry node: visible children nearest first,
-    /// a leaf's triangles on the pixels their rectangles cover.
+    /// a leaf's triangles on the pixels their rectangles cover. What a cast reads (the
+    /// projected nodes and points, the triangles: tens of MB for a large scene) is mostly
+    /// out of cache, so a node asks for what it reads next once it is chosen, and a leaf
+    /// for its triangles' points (in-process alternation, frog at 1024x1024: 10 % faster,
+    /// on one thread or two).
     void traverse(const CameraRays::TilePixels& packet, uint32_t entry) {
         const ProjectedNode* stack[128];
         int top = 0;
@@ -227,6 +231,7 @@ class TileTracer {
         if (!visible(packet, node->rect)) return;
         for (;;) {
             if (node->count != 0) {
+                projected_.prefetch_points(node->index, node->count);
                 for (uint32_t i = node->index, end = node->index + node->count; i < end; ++i) {
                     const ImageRect q = projected_.triangle(i);
                     if (overlaps(packet, q)) test_pixels(i, local(packet, q));
@@ -237,7 +242,11 @@ class TileTracer {
                 if (vl || vr) {
                     const ProjectedNode *first = left, *second = left + 1;
                     if (!vl || (vr && second->rect.near < first->rect.near)) std::swap(first, second);
-                    if (vl && vr) stack[top++] = second;
+                    if (vl && vr) {
+                        stack[top++] = second;
+                        projected_.prefetch(*second);
+                    }
+                    projected_.prefetch(*first);
                     node = first;
                     continue;
                 }
@@ -258,6 +267,7 @@ class TileTracer {
 
     /// Tests triangle i on the block's pixels in `rect`.
     void test_pixels(uint32_t i, const PixelRect& rect) {
+        scene_.prefetch_points(i);  // for the kernel, while the footprint is set up
         const Footprint footprint = projected_.footprint(i);
         for (int64_t r = rect.r0; r <= rect.r1; ++r)
             for (int64_t c = rect.c0; c <= rect.c1; ++c) {
