@@ -59,6 +59,7 @@ class TileTracer {
 
     /// Per-pixel arrays hold a whole tile (a packet, or a flat scene's block), row by row.
     static constexpr int64_t kStride = CameraRays::kTile, kQuads = kStride / 2;
+    static_assert(kStride >= 2 && (kStride & (kStride - 1)) == 0, "test_pixels finds a pixel's quad with masks");
 
     /// Traces the tile's rays as one packet and calls store(pixel, ray, hit) for each.
     template <class Store>
