@@ -15,7 +15,8 @@ scene's C++ layout must be the same in every build; nanobind warns that the type
 registered twice). Every build's image must equal the first's. Prints each build's median
 and minimum time and the median and quartiles of its time over the first build's, round
 by round. The frog scene is the contour of benchmarks/peers.py from its iso camera; the
-bumpy scene is a 330 k-triangle sphere filling the frame.
+bumpy scene is a 330 k-triangle sphere filling the frame; the small one an 82 k-triangle
+sphere covering 1 % of it (benchmarks/skipping.py).
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ def main() -> None:
     parser.add_argument("builds", nargs="+", type=Path, help="directories of `pip install --target` builds")
     parser.add_argument("--rounds", type=int, default=60)
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--scene", choices=["frog", "bumpy"], default="frog")
+    parser.add_argument("--scene", choices=["frog", "bumpy", "small"], default="frog")
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")
     parser.add_argument("--pixels", type=int, default=1024)
     args = parser.parse_args()
@@ -61,11 +62,16 @@ def main() -> None:
 
         mesh = examples.load_frog_tissues().contour_labels()
         camera = vrc.Camera.framing(mesh.bounds, view="iso", nx=n, ny=n)
-    else:
+    elif args.scene == "bumpy":
         from vtkraycast.testing import bumpy_sphere
 
         mesh = bumpy_sphere(7)
         camera = vrc.Camera((2.2, 1.6, 1.2), (0, 0, 0), (0, 0, 1), view_angle=40, nx=n, ny=n)
+    else:  # benchmarks/skipping.py's sphere covering 1 % of the frame
+        from vtkraycast.testing import bumpy_sphere
+
+        mesh = bumpy_sphere(6)
+        camera = vrc.Camera((0, 0, 2.0), (0, 0, 0), (0, 1, 0), view_angle=158.3, nx=n, ny=n)
     mesh = prepare_mesh(mesh)  # the triangulated points and triangles a Scene casts
     scene = cores[0].Scene(mesh.points, mesh.triangles, args.threads, not args.flat)
     images = [np.empty(n * n, np.int64) for _ in cores]
