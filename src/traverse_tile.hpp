@@ -223,8 +223,8 @@ class TileTracer {
     /// a leaf's triangles on the pixels their rectangles cover. What a cast reads (the
     /// projected nodes and points, the triangles: tens of MB for a large scene) is mostly
     /// out of cache, so a node asks for what it reads next once it is chosen, and a leaf
-    /// for its triangles' points (in-process alternation, frog at 1024x1024: 10 % faster,
-    /// on one thread or two).
+    /// for its triangles' points (benchmarks/compare_builds.py, frog at 1024x1024: 10 % less
+    /// time, on one thread or two).
     void traverse(const CameraRays::TilePixels& packet, uint32_t entry) {
         const ProjectedNode* stack[128];
         int top = 0;
