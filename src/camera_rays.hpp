@@ -64,7 +64,7 @@ class CameraRays {
     /// Through a BVH a tile's rays go as one packet (traverse_tile.hpp). Large enough to
     /// share node tests among many rays, small enough that a node behind the hits already
     /// found is culled (at 2x2-pixel quads) and that two workers stay balanced. Alternated
-    /// in one process (benchmarks/compare_builds.py), 2 threads, against 16x16 tiles of
+    /// cast after cast (benchmarks/compare_builds.py), 2 threads, against 16x16 tiles of
     /// 8x8 packets: the frog contour at 1024x1024 takes 0.90x the time, a 330 k-triangle
     /// bumpy sphere filling the frame 0.87x (64x64 tiles are no faster than 32x32, and
     /// 1.06x at 256x256).
