@@ -19,12 +19,12 @@ def median_seconds(fn: Callable[[], Any], repeats: int) -> float:
     return float(np.median(times))
 
 
-def alternated_ratio(fast: Callable[[], Any], slow: Callable[[], Any], pairs: int) -> tuple[float, float, float]:
-    """Median and quartiles of ``slow``'s time over ``fast``'s, timed in alternation: each
+def alternated_ratio(base: Callable[[], Any], other: Callable[[], Any], pairs: int) -> tuple[float, float, float]:
+    """Median and quartiles of ``other``'s time over ``base``'s, timed in alternation: each
     pair sees the same state of a shared machine, which separate medians minutes apart do
     not (a caster's own median moved by 15 % between runs here)."""
     ratios = []
     for _ in range(pairs):
-        ratios.append(median_seconds(slow, 1) / median_seconds(fast, 1))
+        ratios.append(median_seconds(other, 1) / median_seconds(base, 1))
     q1, median, q3 = np.percentile(ratios, [25, 50, 75])
     return float(median), float(q1), float(q3)
