@@ -1,14 +1,16 @@
 // Camera casts on a flat scene (no BVH, as a one-shot cast builds none): each triangle is
-// binned to the tiles its projected pixel rectangle touches, by a counting sort that keeps
-// the input order within a tile.
+// rasterised into the pixels whose rays it may hit (a conservative, single-precision
+// Footprint), and each such (pixel, triangle) pair is binned to the pixel's tile, in input
+// order within a worker's share.
 #pragma once
 
 #include <algorithm>
-#include <atomic>
+#include <cmath>
 #include <cstdint>
-#include <memory>
-#include <thread>
 #include <vector>
+#if defined(__SSE4_1__)
+#include <immintrin.h>
+#endif
 
 #include "bvh.hpp"
 #include "camera_rays.hpp"
@@ -18,65 +20,60 @@ namespace vrc {
 
 class TriangleBins {
    public:
-    /// A triangle in a tile's list, with the pixels of the tile it may cover.
+    /// A pixel a triangle may cover, in its tile's list.
     struct Entry {
-        double near;  ///< lower bound on its depth
+        float near;         ///< lower bound on the triangle's depth
+        float far;          ///< its largest point depth when it seems to cover the pixel's centre, else inf
         uint32_t triangle;
-        uint8_t c0, c1, r0, r1;  ///< pixel rectangle in the tile's own coordinates
+        uint8_t c0, c1, r0, r1;  ///< its pixels in the tile: one, or a rectangle (see bin)
+        [[nodiscard]] bool one_pixel() const { return c0 == c1 && r0 == r1; }
     };
 
     TriangleBins(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, unsigned workers)
         : scene_(scene), rays_(rays), projected_(projected), workers_(workers), n_tiles_(rays.n_tiles()),
           tiles_x_((rays.spec().nx + CameraRays::kTile - 1) / CameraRays::kTile),
-          counts_(std::size_t(workers) * n_tiles_, 0), rects_(new ImageRect[scene.n_triangles()]), unknown_(workers) {}
+          lists_(std::size_t(workers) * n_tiles_), unknown_(workers) {}
 
-    /// First pass, by worker w: the pixel rectangles of its share of the triangles, and
-    /// their count per tile.
-    void count(unsigned w) {
-        uint32_t* counts = counts_.data() + std::size_t(w) * n_tiles_;
+    /// Worker w's share of the triangles, each into the tiles of the pixels it may cover.
+    void bin(unsigned w) {
+        std::vector<Entry>* lists = lists_.data() + std::size_t(w) * n_tiles_;
         unknown_[w].clear();
         for (std::size_t i = share(w), end = share(w + 1); i < end; ++i) {
-            ImageRect& rect = rects_[i];
-            if (projected_.frame_triangle(scene_.triangles.data() + 3 * i, rect) == ProjectedScene::Reach::unknown) {
+            const uint32_t* tri = scene_.triangles.data() + 3 * i;
+#if defined(__SSE4_1__)
+            const __m128 pa = _mm_load_ps(projected_[tri[0]]), pb = _mm_load_ps(projected_[tri[1]]),
+                         pc = _mm_load_ps(projected_[tri[2]]);
+            const __m128 lo = _mm_min_ps(_mm_min_ps(pa, pb), pc), hi = _mm_max_ps(_mm_max_ps(pa, pb), pc);
+            const __m128 span = projected_.pixel_span(lo, hi);  // (c0, c1, r0, r1)
+            // most triangles of a fine mesh cover no pixel centre: c0 > c1 or r0 > r1
+            if (_mm_movemask_ps(_mm_cmpgt_ps(span, _mm_shuffle_ps(span, span, _MM_SHUFFLE(2, 3, 0, 1)))) & 0b0101) continue;
+            if (_mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) != 0) {  // a point with no usable projection
                 unknown_[w].push_back(uint32_t(i));
-                rect = kNoPixels;  // binned nowhere
+                continue;
             }
-            for_each_tile(rect, [&](int64_t, int64_t, std::size_t tile) { ++counts[tile]; });
+            const float near = projected_.near_bound(_mm_cvtss_f32(_mm_movehl_ps(lo, lo)), _mm_cvtss_f32(_mm_movehl_ps(hi, hi)));
+            if (near == HUGE_VALF) continue;
+            alignas(16) int32_t p[4];
+            _mm_store_si128(reinterpret_cast<__m128i*>(p), _mm_cvtps_epi32(span));
+            rasterise(uint32_t(i), pa, pb, pc, lo, hi, near, p[0], p[1], p[2], p[3], lists);
+#else
+            ImageRect rect;
+            const ProjectedScene::Reach reach = projected_.frame_triangle(tri, rect);
+            if (reach == ProjectedScene::Reach::unknown) unknown_[w].push_back(uint32_t(i));
+            if (reach != ProjectedScene::Reach::rect) continue;
+            const Footprint footprint = projected_.footprint(uint32_t(i));
+            for (int64_t r = rect.r0; r <= rect.r1; ++r)
+                for (int64_t col = rect.c0; col <= rect.c1; ++col)
+                    if (footprint.may_cover(double(col), double(r))) add(lists, col, r, {rect.near, HUGE_VALF, uint32_t(i), 0, 0, 0, 0});
+#endif
         }
     }
 
-    /// Second pass, by worker w once every worker counted: places its triangles.
-    void place(unsigned w) {
-        if (w == 0) {  // offsets: tile by tile, and within a tile worker by worker (input order)
-            std::size_t total = 0;
-            offsets_.assign(n_tiles_ + 1, 0);
-            for (std::size_t t = 0; t < n_tiles_; ++t) {
-                offsets_[t] = total;
-                for (unsigned v = 0; v < workers_; ++v) total += counts_[std::size_t(v) * n_tiles_ + t];
-            }
-            offsets_[n_tiles_] = total;
-            list_.reset(new Entry[total]);
-            ready_.store(true);
-        }
-        while (!ready_.load()) std::this_thread::yield();
-        std::vector<std::size_t> next(n_tiles_);
-        for (std::size_t t = 0; t < n_tiles_; ++t) {
-            next[t] = offsets_[t];
-            for (unsigned v = 0; v < w; ++v) next[t] += counts_[std::size_t(v) * n_tiles_ + t];
-        }
-        constexpr int64_t k = CameraRays::kTile;
-        const auto local = [](int64_t v, int64_t origin) { return uint8_t(std::min(std::max(v - origin, int64_t(0)), k - 1)); };
-        for (std::size_t i = share(w), end = share(w + 1); i < end; ++i) {
-            const ImageRect& r = rects_[i];
-            for_each_tile(r, [&](int64_t tx, int64_t ty, std::size_t tile) {
-                list_[next[tile]++] = {double(r.near), uint32_t(i), local(r.c0, tx * k), local(r.c1, tx * k),
-                                       local(r.r0, ty * k), local(r.r1, ty * k)};
-            });
-        }
+    /// Worker w's entries for a tile.
+    [[nodiscard]] const std::vector<Entry>& list(unsigned w, std::size_t tile) const {
+        return lists_[std::size_t(w) * n_tiles_ + tile];
     }
-
-    [[nodiscard]] const Entry* begin(std::size_t tile) const { return list_.get() + offsets_[tile]; }
-    [[nodiscard]] const Entry* end(std::size_t tile) const { return list_.get() + offsets_[tile + 1]; }
+    [[nodiscard]] unsigned workers() const { return workers_; }
     /// Triangles with no usable projection (crossing a pinhole's eye plane), in input order.
     [[nodiscard]] std::vector<uint32_t> unknown() const {
         std::vector<uint32_t> all;
@@ -85,17 +82,70 @@ class TriangleBins {
     }
 
    private:
+    static constexpr int64_t kTile = CameraRays::kTile;
+    /// Triangles over more pixels than this are binned as a rectangle per tile, tested
+    /// pixel by pixel by the tracer: in single-pixel entries they cost more than their
+    /// footprint test saves (compare_builds.py --flat, alternated: 2 pixels took 1.11x the
+    /// time of 4 on the frog, 8 took 1.06x on the bumpy sphere).
+    static constexpr int64_t kMaxPixels = 4;
+
+    static_assert((kTile & (kTile - 1)) == 0, "tiles are found with shifts and masks");
+    static constexpr int kShift = __builtin_ctzll(uint64_t(kTile));
+    /// Adds entry e for image pixel (col, r) to its tile's list.
+    void add(std::vector<Entry>* lists, int64_t col, int64_t r, Entry e) const {
+        e.c0 = e.c1 = uint8_t(col & (kTile - 1));
+        e.r0 = e.r1 = uint8_t(r & (kTile - 1));
+        lists[(col >> kShift) + (r >> kShift) * tiles_x_].push_back(e);
+    }
+    /// Adds triangle i's pixels c0..c1 x r0..r1 to each tile they meet, as rectangles.
+    void add_rect(std::vector<Entry>* lists, uint32_t i, float near, int64_t c0, int64_t c1, int64_t r0, int64_t r1) const {
+        const auto local = [](int64_t v, int64_t origin) { return uint8_t(std::min(std::max(v - origin, int64_t(0)), kTile - 1)); };
+        for (int64_t ty = r0 >> kShift; ty <= r1 >> kShift; ++ty)
+            for (int64_t tx = c0 >> kShift; tx <= c1 >> kShift; ++tx)
+                lists[tx + ty * tiles_x_].push_back({near, HUGE_VALF, i, local(c0, tx * kTile), local(c1, tx * kTile),
+                                                     local(r0, ty * kTile), local(r1, ty * kTile)});
+    }
+
+#if defined(__SSE4_1__)
+    /// Triangle i (projected points pa, pb, pc within [lo, hi]) on the pixels c0..c1 x
+    /// r0..r1: those whose rays it may hit, by Footprint's test in single precision.
+    void rasterise(uint32_t i, __m128 pa, __m128 pb, __m128 pc, __m128 lo, __m128 hi, float near, int64_t c0, int64_t c1,
+                   int64_t r0, int64_t r1, std::vector<Entry>* lists) const {
+        if ((c1 - c0 + 1) * (r1 - r0 + 1) > kMaxPixels) return add_rect(lists, i, near, c0, c1, r0, r1);
+        const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(INT32_MAX));
+        // Edge k runs from point k to point k + 1 (lane 3 repeats lane 2): its start (x, y)
+        // and its vector (ex, ey).
+        const __m128 ab = _mm_unpacklo_ps(pa, pb), bc = _mm_unpacklo_ps(pb, pc);
+        const __m128 x = _mm_shuffle_ps(ab, pc, _MM_SHUFFLE(0, 0, 1, 0)), y = _mm_shuffle_ps(ab, pc, _MM_SHUFFLE(1, 1, 3, 2));
+        const __m128 ex = _mm_sub_ps(_mm_shuffle_ps(bc, pa, _MM_SHUFFLE(0, 0, 1, 0)), x);
+        const __m128 ey = _mm_sub_ps(_mm_shuffle_ps(bc, pa, _MM_SHUFFLE(1, 1, 3, 2)), y);
+        // Footprint's slack m (|ex| + |ey|) with its m (the margin, then 2^-23 size and
+        // 2^-49 max(size, 2^16) for the points' rounding), plus this test's own rounding:
+        // under 5 roundings of |ex dy| + |ey dx|, where |dx|, |dy| <= 2 size + margin (a
+        // pixel centre is within the margin of the points' box). Both fit in
+        // m' = 1.01 margin + 2^-20 (3 size + margin + 2).
+        const __m128 big = _mm_max_ps(_mm_and_ps(lo, abs_mask), _mm_and_ps(hi, abs_mask));
+        const float size = std::max(_mm_cvtss_f32(big), _mm_cvtss_f32(_mm_shuffle_ps(big, big, 1)));
+        const float margin = projected_.margin(), m = 1.01f * margin + 0x1p-20f * (3 * size + margin + 2);
+        const __m128 slack =
+            _mm_add_ps(_mm_mul_ps(_mm_set1_ps(m), _mm_add_ps(_mm_and_ps(ex, abs_mask), _mm_and_ps(ey, abs_mask))), _mm_set1_ps(0x1p-120f));
+        const __m128 minus_slack = _mm_xor_ps(slack, _mm_set1_ps(-0.0f));
+        const float far = _mm_cvtss_f32(_mm_movehl_ps(hi, hi));
+        const auto test = [&](int64_t col, int64_t r, __m128 row) {
+            const __m128 e = _mm_sub_ps(row, _mm_mul_ps(ey, _mm_sub_ps(_mm_set1_ps(float(col)), x)));
+            const int below = _mm_movemask_ps(_mm_cmplt_ps(e, minus_slack)), above = _mm_movemask_ps(_mm_cmpgt_ps(e, slack));
+            if (below != 0 && above != 0) return;  // outside: no ray of the pixel can hit it
+            add(lists, col, r, {near, below == 15 || above == 15 ? far : HUGE_VALF, i, 0, 0, 0, 0});
+        };
+        for (int64_t r = r0; r <= r1; ++r) {
+            const __m128 row = _mm_mul_ps(ex, _mm_sub_ps(_mm_set1_ps(float(r)), y));
+            for (int64_t col = c0; col <= c1; ++col) test(col, r, row);
+        }
+    }
+#endif
+
     /// First triangle of worker w's share.
     [[nodiscard]] std::size_t share(unsigned w) const { return scene_.n_triangles() * w / workers_; }
-
-    /// Calls f(tile column, tile row, tile) for each tile the rectangle touches.
-    template <class F>
-    void for_each_tile(const ImageRect& r, F&& f) const {
-        if (r.empty()) return;
-        for (int64_t ty = r.r0 / CameraRays::kTile; ty <= r.r1 / CameraRays::kTile; ++ty)
-            for (int64_t tx = r.c0 / CameraRays::kTile; tx <= r.c1 / CameraRays::kTile; ++tx)
-                f(tx, ty, std::size_t(tx + ty * tiles_x_));
-    }
 
     const Scene& scene_;
     const CameraRays& rays_;
@@ -103,12 +153,8 @@ class TriangleBins {
     unsigned workers_;
     std::size_t n_tiles_;
     int64_t tiles_x_;
-    std::vector<uint32_t> counts_;  // (worker, tile)
-    std::vector<std::size_t> offsets_;
-    std::unique_ptr<ImageRect[]> rects_;  // each triangle's (empty when binned nowhere)
-    std::unique_ptr<Entry[]> list_;
+    std::vector<std::vector<Entry>> lists_;  // (worker, tile)
     std::vector<std::vector<uint32_t>> unknown_;  // per worker
-    std::atomic<bool> ready_{false};
 };
 
 }  // namespace vrc

@@ -228,6 +228,21 @@ class ProjectedScene {
 #endif
     }
 
+#if defined(__SSE4_1__)
+    /// The pixels (c0, c1, r0, r1 as floats, clamped as in rect4) whose centres lie within
+    /// the margin of the box [lo, hi] of usable projected points: none when c0 > c1 or r0 > r1.
+    [[nodiscard]] __m128 pixel_span(__m128 lo, __m128 hi) const {
+        const __m128 v = _mm_add_ps(_mm_unpacklo_ps(lo, hi), margin4_);
+        return _mm_min_ps(_mm_max_ps(_mm_blend_ps(_mm_ceil_ps(v), _mm_floor_ps(v), 0b1010), floor4_), ceil4_);
+    }
+#endif
+    /// A lower bound on depths within [lo_z, hi_z] (stored point depths, see rect4), or
+    /// HUGE_VALF when they all lie outside the camera's [near, far].
+    [[nodiscard]] float near_bound(float lo_z, float hi_z) const {
+        const float near = lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_), far = hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_);
+        return near > far_ || far < near_ ? HUGE_VALF : near;
+    }
+
     /// Through a BVH, triangle i's rectangle (leaf order).
     [[nodiscard]] ImageRect triangle(uint32_t i) const {
         ImageRect rect;
@@ -259,6 +274,7 @@ class ProjectedScene {
     [[nodiscard]] const double* to_anchor() const { return to_anchor_; }  ///< anchor - eye
     [[nodiscard]] const double* reach() const { return reach_; }          ///< box extent from the anchor
     [[nodiscard]] double depth_slack() const { return depth_slack_; }     ///< rounding of any depth
+    [[nodiscard]] float margin() const { return margin_; }                ///< see Footprint
 
    private:
 #if defined(__AVX__)

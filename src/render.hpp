@@ -93,9 +93,7 @@ struct CameraCast {
             barrier.wait();
             return {};
         }
-        bins->count(w);
-        barrier.wait();
-        bins->place(w);
+        bins->bin(w);
         barrier.wait();
         return bins->unknown();
     }
@@ -159,7 +157,7 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
                 TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context);
                 for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
                     if (camera->bins && rays.tile_may_hit(tile))
-                        tracer.trace_bin(tile, camera->bins->begin(tile), camera->bins->end(tile), unknown, store);
+                        tracer.trace_bin(tile, *camera->bins, unknown, store);
                     else
                         tracer.trace(tile, store);
                     tile_done();

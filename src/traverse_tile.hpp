@@ -55,6 +55,8 @@ class TileTracer {
         scale_.resize(n);
         depth_bound_.assign(n, -HUGE_VAL);
         quad_.assign(n / 4, -HUGE_VAL);
+        guess_far_.resize(n);
+        guess_.resize(n);
     }
 
     /// Per-pixel arrays hold a whole tile (a packet, or a flat scene's block), row by row.
@@ -77,16 +79,41 @@ class TileTracer {
         finish(store);
     }
 
-    /// A flat scene's tile (no BVH) that may see the scene: its binned triangles (`begin`
-    /// to `end`, see bin_triangles.hpp), then those with no usable projection (`unknown`),
-    /// which are tested on the whole tile unless the tile's frustum separates them.
+    /// A flat scene's tile (no BVH) that may see the scene: the pixels its triangles may
+    /// cover (`bins`, see bin_triangles.hpp), then the triangles with no usable projection
+    /// (`unknown`), which are tested on the whole tile unless the tile's frustum separates
+    /// them. Each pixel first tests its likely hit (the nearest triangle whose projection
+    /// seems to cover its centre), whose depth then culls the rest.
     template <class Store>
-    void trace_bin(std::size_t tile, const TriangleBins::Entry* begin, const TriangleBins::Entry* end,
-                   const std::vector<uint32_t>& unknown, Store&& store) {
+    void trace_bin(std::size_t tile, const TriangleBins& bins, const std::vector<uint32_t>& unknown, Store&& store) {
         const CameraRays::TilePixels p = rays_.tile_pixels(tile);
+        bool any = !unknown.empty();
+        for (unsigned w = 0; w < bins.workers(); ++w) any |= !bins.list(w, tile).empty();
+        if (!any) {
+            const int64_t nx = int64_t(rays_.spec().nx);
+            for (int64_t r = p.r0; r <= p.r1; ++r)
+                for (int64_t i = p.i0; i <= p.i1; ++i) store(std::size_t(i + r * nx), Ray{}, Hit<Real>{});
+            return;
+        }
         start(p);
-        for (const TriangleBins::Entry* e = begin; e != end; ++e)
-            test_pixels(e->triangle, {e->c0, e->c1, e->r0, e->r1, e->near});
+        std::fill(guess_far_.begin(), guess_far_.end(), HUGE_VALF);
+        for (unsigned w = 0; w < bins.workers(); ++w)
+            for (const TriangleBins::Entry& e : bins.list(w, tile)) {
+                const int64_t j = e.c0 + e.r0 * kStride;  // (a rectangle's far is inf)
+                if (e.far < guess_far_[j]) guess_far_[j] = e.far, guess_[j] = e.triangle;
+            }
+        for (int64_t j = 0; j < kStride * kStride; ++j)
+            if (guess_far_[j] < HUGE_VALF) test_pixel(j, guess_[j]);
+        for (unsigned w = 0; w < bins.workers(); ++w)
+            for (const TriangleBins::Entry& e : bins.list(w, tile)) {
+                if (!e.one_pixel()) {
+                    test_pixels(e.triangle, {e.c0, e.c1, e.r0, e.r1, e.near});
+                    continue;
+                }
+                const int64_t j = e.c0 + e.r0 * kStride;
+                if (double(e.near) > depth_bound_[j] || (guess_far_[j] < HUGE_VALF && guess_[j] == e.triangle)) continue;
+                test_pixel(j, e.triangle);
+            }
         if (!unknown.empty()) set_sides(p);
         for (uint32_t i : unknown)
             if (!separated(i)) test_pixels(i, {0, width_ - 1, 0, height_ - 1});
@@ -286,6 +313,14 @@ class TileTracer {
             }
     }
 
+    /// Tests triangle i on the block's ray j (its depth bound then follows any closer hit).
+    void test_pixel(int64_t j, uint32_t i) {
+        if (!kernel_[j]) make_ray(j);
+        const double before = bound_[j];
+        test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
+        if (bound_[j] != before) depth_bound_[j] = bound_[j] * scale_[j] * (1 + 1e-12) + projected_.depth_slack();
+    }
+
     void make_ray(int64_t j) {
         ray_[j] = rays_.ray(i0_ + j % kStride, r0_ + j / kStride);
         kernel_[j].emplace(ray_[j], context_);
@@ -305,6 +340,8 @@ class TileTracer {
     std::vector<std::optional<Kernel>> kernel_;
     std::vector<Hit<Real>> hit_;
     std::vector<double> bound_, scale_, depth_bound_;
+    std::vector<float> guess_far_;  // a flat scene's likely hit per pixel: its farthest point depth
+    std::vector<uint32_t> guess_;
     std::vector<double> quad_;  // the largest depth_bound_ of each 2x2 quad of pixels  // t of the hit, depth per unit t, depth of the hit rounded up
 };
 

@@ -94,9 +94,11 @@ def test_eye_inside_a_closed_mesh(offset):
     assert assert_same_as_ray_by_ray(vrc.Scene(star_mesh(cam)), cam) == 33 * 25
 
 
-@pytest.mark.parametrize(("centre", "pixel", "n"), [(4.0, 0.25, 32), (4.5, 2.0**-25, 30)])
+@pytest.mark.parametrize(("centre", "pixel", "n"), [(4.0, 0.25, 32), (4.5, 2.0**-25, 30), (4.0, 1.0, 8), (4.0, 2.0, 4)])
 def test_rays_through_vertices_and_edges(centre, pixel, n):
-    # Cameras whose pixel centres land on the grid's vertices and edges. Zoomed in, the
+    # Cameras whose pixel centres land on the grid's vertices and edges (at 1 and 2 units
+    # a pixel, its triangles are smaller than a pixel: each is binned pixel by pixel on a
+    # flat scene). Zoomed in, the
     # centres still lie exactly on a diagonal edge, whose points project 2^24 pixels away,
     # to columns and rows that single precision rounds by half a pixel, both the same way
     # (the footprint that keeps a triangle's pixels must allow for that rounding).
@@ -106,6 +108,16 @@ def test_rays_through_vertices_and_edges(centre, pixel, n):
     assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam) == n * n
     cam = vrc.Camera(eye, target, (0, 1, 0), d=10, w=n * pixel, h=n * pixel, nx=n, ny=n)
     assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam) == n * n
+
+
+@pytest.mark.parametrize("culling", [False, True])
+@pytest.mark.parametrize("parallel", [False, True])
+def test_triangles_smaller_than_pixels(culling, parallel):
+    # 330 k triangles, front and back, a few per pixel: a flat scene bins them pixel by
+    # pixel, and each pixel first tests the nearest triangle that seems to cover it.
+    mesh = bumpy_sphere(7)
+    cam = around(mesh, parallel=parallel, nx=96, ny=80)
+    assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam, backface_culling=culling) > 1000
 
 
 @pytest.mark.parametrize("precision", ["float64", "float32"])
