@@ -137,6 +137,7 @@ class TriangleBins {
             if (below != 0 && above != 0) return;  // outside: no ray of the pixel can hit it
             add(lists, col, r, {near, below == 15 || above == 15 ? far : HUGE_VALF, i, 0, 0, 0, 0});
         };
+        if (c0 == c1 && r0 == r1) return test(c0, r0, _mm_mul_ps(ex, _mm_sub_ps(_mm_set1_ps(float(r0)), y)));  // the usual case
         for (int64_t r = r0; r <= r1; ++r) {
             const __m128 row = _mm_mul_ps(ex, _mm_sub_ps(_mm_set1_ps(float(r)), y));
             for (int64_t col = c0; col <= c1; ++col) test(col, r, row);
