@@ -1,7 +1,10 @@
-// Camera casts on a flat scene (no BVH, as a one-shot cast builds none): each triangle is
-// rasterised into the pixels whose rays it may hit (a conservative, single-precision
-// Footprint), and each such (pixel, triangle) pair is binned to the pixel's tile, in input
-// order within a worker's share.
+// Camera casts on a flat scene (no BVH, as a one-shot cast builds none), rasterised once
+// per camera: each triangle over a few pixels adds an entry for each pixel whose ray it may
+// hit (Footprint's test, in single precision) to that pixel's tile; a larger one adds its
+// pixel rectangle to each tile it meets. Entries keep the input order within a worker's
+// share of the triangles. The tracer then tests each pixel's likely hit first (the entry
+// nearest in depth whose projection seems to cover the pixel's centre), so the entries
+// behind it are culled by their nearest depth without a test.
 #pragma once
 
 #include <algorithm>
@@ -20,7 +23,7 @@ namespace vrc {
 
 class TriangleBins {
    public:
-    /// A pixel a triangle may cover, in its tile's list.
+    /// A pixel (or a rectangle of pixels) a triangle may cover, in its tile's list.
     struct Entry {
         float near;         ///< lower bound on the triangle's depth
         float far;          ///< its largest point depth when it seems to cover the pixel's centre, else inf
