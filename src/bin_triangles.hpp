@@ -33,7 +33,7 @@ class TriangleBins {
     };
 
     TriangleBins(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, unsigned workers)
-        : scene_(scene), rays_(rays), projected_(projected), workers_(workers), n_tiles_(rays.n_tiles()),
+        : scene_(scene), projected_(projected), workers_(workers), n_tiles_(rays.n_tiles()),
           tiles_x_((rays.spec().nx + CameraRays::kTile - 1) / CameraRays::kTile),
           lists_(std::size_t(workers) * n_tiles_), unknown_(workers) {}
 
@@ -152,7 +152,6 @@ class TriangleBins {
     [[nodiscard]] std::size_t share(unsigned w) const { return scene_.n_triangles() * w / workers_; }
 
     const Scene& scene_;
-    const CameraRays& rays_;
     const ProjectedScene& projected_;
     unsigned workers_;
     std::size_t n_tiles_;

@@ -2,10 +2,10 @@
 // tile's entry node: a node is culled once per packet against the packet's pixels (with
 // the node's image rectangle, projected_scene.hpp) and against the depths its rays still
 // search there, and a leaf's triangles are tested only on the pixels whose centres their
-// projection can cover. On a flat scene (no BVH) a tile takes the triangles binned to it
-// instead (bin_triangles.hpp). The ray-triangle test itself is the per-ray one
-// (test_triangle), so every result equals the ray-by-ray traversal's; only the work of
-// finding candidates is shared. Frustum and occlusion culling of a ray packet follow
+// projection can cover. On a flat scene (no BVH) a tile takes the pixels its triangles
+// were rasterised into instead (bin_triangles.hpp). The ray-triangle test itself is the
+// per-ray one (test_triangle), so every result equals the ray-by-ray traversal's; only the
+// work of finding candidates is shared. Frustum and occlusion culling of a ray packet follow
 // Reshetov, Soupikov and Hurley, "Multi-level ray tracing algorithm" (SIGGRAPH 2005), and
 // Wald, Boulos and Shirley, "Ray tracing deformable scenes using dynamic bounding volume
 // hierarchies" (ACM TOG 2007).
@@ -68,12 +68,7 @@ class TileTracer {
     void trace(std::size_t tile, Store&& store) {
         const CameraRays::TilePixels t = rays_.tile_pixels(tile);
         const uint32_t entry = rays_.tile_may_hit(tile) && !scene_.nodes.empty() ? entry_node(t) : kNoNode;
-        if (entry == kNoNode) {  // no node's rectangle meets the tile: misses, no rays made
-            const int64_t nx = int64_t(rays_.spec().nx);
-            for (int64_t r = t.r0; r <= t.r1; ++r)
-                for (int64_t i = t.i0; i <= t.i1; ++i) store(std::size_t(i + r * nx), Ray{}, Hit<Real>{});
-            return;
-        }
+        if (entry == kNoNode) return misses(t, store);  // no node's rectangle meets the tile
         start(t);
         traverse(t, entry);
         finish(store);
@@ -89,12 +84,7 @@ class TileTracer {
         const CameraRays::TilePixels p = rays_.tile_pixels(tile);
         bool any = !unknown.empty();
         for (unsigned w = 0; w < bins.workers(); ++w) any |= !bins.list(w, tile).empty();
-        if (!any) {
-            const int64_t nx = int64_t(rays_.spec().nx);
-            for (int64_t r = p.r0; r <= p.r1; ++r)
-                for (int64_t i = p.i0; i <= p.i1; ++i) store(std::size_t(i + r * nx), Ray{}, Hit<Real>{});
-            return;
-        }
+        if (!any) return misses(p, store);
         start(p);
         std::fill(guess_far_.begin(), guess_far_.end(), HUGE_VALF);
         for (unsigned w = 0; w < bins.workers(); ++w)
@@ -122,6 +112,14 @@ class TileTracer {
 
    private:
     static constexpr uint32_t kNoNode = UINT32_MAX;
+
+    /// Stores a miss for each pixel of a tile nothing in it can hit, without making rays.
+    template <class Store>
+    void misses(const CameraRays::TilePixels& p, Store& store) const {
+        const int64_t nx = int64_t(rays_.spec().nx);
+        for (int64_t r = p.r0; r <= p.r1; ++r)
+            for (int64_t i = p.i0; i <= p.i1; ++i) store(std::size_t(i + r * nx), Ray{}, Hit<Real>{});
+    }
 
     /// The tile's entry point (Reshetov et al. 2005): the deepest node whose subtree holds
     /// every node whose rectangle meets the tile, so its packets skip the levels above;
