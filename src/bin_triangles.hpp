@@ -67,7 +67,7 @@ class TriangleBins {
             const Footprint footprint = projected_.footprint(uint32_t(i));
             for (int64_t r = rect.r0; r <= rect.r1; ++r)
                 for (int64_t col = rect.c0; col <= rect.c1; ++col)
-                    if (footprint.may_cover(double(col), double(r))) add(lists, col, r, {rect.near, HUGE_VALF, uint32_t(i), 0, 0, 0, 0});
+                    if (footprint.may_cover(col, r)) add(lists, col, r, {rect.near, HUGE_VALF, uint32_t(i), 0, 0, 0, 0});
 #endif
         }
     }
@@ -111,38 +111,19 @@ class TriangleBins {
 
 #if defined(__SSE4_1__)
     /// Triangle i (projected points pa, pb, pc within [lo, hi]) on the pixels c0..c1 x
-    /// r0..r1: those whose rays it may hit, by Footprint's test in single precision.
+    /// r0..r1: those whose rays it may hit, by its Footprint in single precision.
     void rasterise(uint32_t i, __m128 pa, __m128 pb, __m128 pc, __m128 lo, __m128 hi, float near, int64_t c0, int64_t c1,
                    int64_t r0, int64_t r1, std::vector<Entry>* lists) const {
         if ((c1 - c0 + 1) * (r1 - r0 + 1) > kMaxPixels) return add_rect(lists, i, near, c0, c1, r0, r1);
-        const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(INT32_MAX));
-        // Edge k runs from point k to point k + 1 (lane 3 repeats lane 2): its start (x, y)
-        // and its vector (ex, ey).
-        const __m128 ab = _mm_unpacklo_ps(pa, pb), bc = _mm_unpacklo_ps(pb, pc);
-        const __m128 x = _mm_shuffle_ps(ab, pc, _MM_SHUFFLE(0, 0, 1, 0)), y = _mm_shuffle_ps(ab, pc, _MM_SHUFFLE(1, 1, 3, 2));
-        const __m128 ex = _mm_sub_ps(_mm_shuffle_ps(bc, pa, _MM_SHUFFLE(0, 0, 1, 0)), x);
-        const __m128 ey = _mm_sub_ps(_mm_shuffle_ps(bc, pa, _MM_SHUFFLE(1, 1, 3, 2)), y);
-        // Footprint's slack m (|ex| + |ey|) with its m (the margin, then 2^-23 size and
-        // 2^-49 max(size, 2^16) for the points' rounding), plus this test's own rounding:
-        // under 5 roundings of |ex dy| + |ey dx|, where |dx|, |dy| <= 2 size + margin (a
-        // pixel centre is within the margin of the points' box). Both fit in
-        // m' = 1.01 margin + 2^-20 (3 size + margin + 2).
-        const __m128 big = _mm_max_ps(_mm_and_ps(lo, abs_mask), _mm_and_ps(hi, abs_mask));
-        const float size = std::max(_mm_cvtss_f32(big), _mm_cvtss_f32(_mm_shuffle_ps(big, big, 1)));
-        const float margin = projected_.margin(), m = 1.01f * margin + 0x1p-20f * (3 * size + margin + 2);
-        const __m128 slack =
-            _mm_add_ps(_mm_mul_ps(_mm_set1_ps(m), _mm_add_ps(_mm_and_ps(ex, abs_mask), _mm_and_ps(ey, abs_mask))), _mm_set1_ps(0x1p-120f));
-        const __m128 minus_slack = _mm_xor_ps(slack, _mm_set1_ps(-0.0f));
+        const Footprint footprint(pa, pb, pc, lo, hi, projected_.margin());
         const float far = _mm_cvtss_f32(_mm_movehl_ps(hi, hi));
         const auto test = [&](int64_t col, int64_t r, __m128 row) {
-            const __m128 e = _mm_sub_ps(row, _mm_mul_ps(ey, _mm_sub_ps(_mm_set1_ps(float(col)), x)));
-            const int below = _mm_movemask_ps(_mm_cmplt_ps(e, minus_slack)), above = _mm_movemask_ps(_mm_cmpgt_ps(e, slack));
-            if (below != 0 && above != 0) return;  // outside: no ray of the pixel can hit it
-            add(lists, col, r, {near, below == 15 || above == 15 ? far : HUGE_VALF, i, 0, 0, 0, 0});
+            const Footprint::Cover cover = footprint.cover(col, row);
+            if (cover != Footprint::kNone) add(lists, col, r, {near, cover == Footprint::kInside ? far : HUGE_VALF, i, 0, 0, 0, 0});
         };
-        if (c0 == c1 && r0 == r1) return test(c0, r0, _mm_mul_ps(ex, _mm_sub_ps(_mm_set1_ps(float(r0)), y)));  // the usual case
+        if (c0 == c1 && r0 == r1) return test(c0, r0, footprint.row(r0));  // the usual case
         for (int64_t r = r0; r <= r1; ++r) {
-            const __m128 row = _mm_mul_ps(ex, _mm_sub_ps(_mm_set1_ps(float(r)), y));
+            const __m128 row = footprint.row(r);
             for (int64_t col = c0; col <= c1; ++col) test(col, r, row);
         }
     }

@@ -27,7 +27,11 @@ struct CameraSpec {
 /// depth = t d. Parallel rays start at (x, y, 0) with direction (0, 0, -1): depth = t.
 class CameraRays {
    public:
-    explicit CameraRays(const CameraSpec& c) : c_(c) {}
+    explicit CameraRays(const CameraSpec& c)
+        : c_(c), pitch_x_(c.width / double(c.nx)), pitch_y_(c.height / double(c.ny)),
+          tmin_(c.parallel ? c.near : c.near / c.d), tmax_(c.parallel ? c.far : c.far / c.d) {
+        for (int k = 0; k < 3; ++k) dw_[k] = c.d * c.w[k];
+    }
     [[nodiscard]] std::size_t size() const { return std::size_t(c_.nx) * std::size_t(c_.ny); }
 
     [[nodiscard]] Ray ray(std::size_t pixel) const {
@@ -36,24 +40,23 @@ class CameraRays {
     /// The ray of pixel column i, row r.
     [[nodiscard]] Ray ray(int64_t i, int64_t r) const {
         const int64_t j = c_.ny - 1 - r;
-        const double x = -c_.width * 0.5 + c_.width / double(c_.nx) * (double(i) + 0.5);
-        const double y = c_.height * 0.5 - c_.height / double(c_.ny) * (double(j) + 0.5);
+        // (divisions done once, in the constructor: the same values)
+        const double x = -c_.width * 0.5 + pitch_x_ * (double(i) + 0.5);
+        const double y = c_.height * 0.5 - pitch_y_ * (double(j) + 0.5);
         Ray ray;
+        ray.tmin = tmin_;
+        ray.tmax = tmax_;
         if (c_.parallel) {
             for (int k = 0; k < 3; ++k) {
                 ray.org[k] = c_.eye[k] + x * c_.u[k] + y * c_.v[k];
                 ray.dir[k] = -c_.w[k];
             }
-            ray.tmin = c_.near;
-            ray.tmax = c_.far;
             ray.t_unit = 1.0;
         } else {
             for (int k = 0; k < 3; ++k) {
                 ray.org[k] = c_.eye[k];
-                ray.dir[k] = x * c_.u[k] + y * c_.v[k] - c_.d * c_.w[k];
+                ray.dir[k] = x * c_.u[k] + y * c_.v[k] - dw_[k];
             }
-            ray.tmin = c_.near / c_.d;
-            ray.tmax = c_.far / c_.d;
             ray.t_unit = c_.d;  // depth = t d
         }
         ray.normalize_direction();
@@ -159,8 +162,8 @@ class CameraRays {
                 y *= c_.d / depth[corner];
             }
             // pixel coordinates: column i, and row r counted from the bottom
-            const double i = (x + c_.width * 0.5) / (c_.width / double(c_.nx)) - 0.5;
-            const double r = (y + c_.height * 0.5) / (c_.height / double(c_.ny)) - 0.5;
+            const double i = (x + c_.width * 0.5) / pitch_x_ - 0.5;
+            const double r = (y + c_.height * 0.5) / pitch_y_ - 0.5;
             lo_i = std::min(lo_i, i), hi_i = std::max(hi_i, i);
             lo_r = std::min(lo_r, r), hi_r = std::max(hi_r, r);
         }
@@ -186,6 +189,7 @@ class CameraRays {
    private:
     [[nodiscard]] int64_t tiles_x() const { return (c_.nx + kTile - 1) / kTile; }
     CameraSpec c_;
+    double pitch_x_, pitch_y_, tmin_, tmax_, dw_[3];  // the image plane's pixel size, t's range, d w
     int64_t i_lo_ = INT64_MIN / 2, i_hi_ = INT64_MAX / 2, r_lo_ = INT64_MIN / 2, r_hi_ = INT64_MAX / 2;
 };
 

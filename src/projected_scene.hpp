@@ -49,10 +49,55 @@ constexpr ImageRect kNoPixels{uint16_t(ImageRect::kMaxPixels), 0, uint16_t(Image
 /// D = (B - A) x (C - A); likewise for BC (a D) and CA (b D). Every edge function is
 /// therefore >= -margin (|x| + |y| of its edge) when D >= 0, or all are <= +that when
 /// D <= 0; a pixel failing both cannot be hit, whatever the triangle's orientation.
-/// Evaluated in double from the stored floats, with a slack for that rounding too.
-/// A triangle with a point of no usable projection keeps every pixel.
+/// Evaluated from the stored floats with a slack for that rounding too, for pixel centres
+/// within the margin of the points' box (those of the triangle's rectangle). A triangle
+/// with a point of no usable projection keeps every pixel.
 class Footprint {
    public:
+    /// What a pixel's ray can hit: nothing, maybe the triangle, or the triangle surely
+    /// (its centre lies inside every edge by more than the slack: a likely hit, see
+    /// bin_triangles.hpp; never claimed without SSE4.1).
+    enum Cover { kNone, kMay, kInside };
+#if defined(__SSE4_1__)
+    /// From the projected points (column, row, depth, flag) and their box [lo, hi].
+    Footprint(__m128 pa, __m128 pb, __m128 pc, __m128 lo, __m128 hi, float margin)
+        : known_(_mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) == 0) {
+        const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(INT32_MAX));
+        // Edge k runs from point k to point k + 1 (lane 3 repeats lane 2): its start (x, y)
+        // and its vector (ex, ey).
+        const __m128 ab = _mm_unpacklo_ps(pa, pb), bc = _mm_unpacklo_ps(pb, pc);
+        x_ = _mm_shuffle_ps(ab, pc, _MM_SHUFFLE(0, 0, 1, 0)), y_ = _mm_shuffle_ps(ab, pc, _MM_SHUFFLE(1, 1, 3, 2));
+        ex_ = _mm_sub_ps(_mm_shuffle_ps(bc, pa, _MM_SHUFFLE(0, 0, 1, 0)), x_);
+        ey_ = _mm_sub_ps(_mm_shuffle_ps(bc, pa, _MM_SHUFFLE(1, 1, 3, 2)), y_);
+        // The slack m (|ex| + |ey|) needs m >= the margin, plus 2^-23 size (the stored
+        // rounding of points beyond the image; the margin covers those within it) and
+        // 2^-49 max(size, 2^16) (the points' rounding in the exact argument), plus this
+        // test's own rounding: under 5 roundings of |ex dy| + |ey dx|, where |dx|, |dy| <=
+        // 2 size + margin for a centre within the margin of the box. All of it fits in
+        // m = 1.01 margin + 2^-20 (3 size + margin + 2), whose own rounding the 1.01 covers.
+        const __m128 big = _mm_max_ps(_mm_and_ps(lo, abs_mask), _mm_and_ps(hi, abs_mask));
+        const float size = std::max(_mm_cvtss_f32(big), _mm_cvtss_f32(_mm_shuffle_ps(big, big, 1)));
+        const float m = 1.01f * margin + 0x1p-20f * (3 * size + margin + 2);
+        slack_ = _mm_add_ps(_mm_mul_ps(_mm_set1_ps(m), _mm_add_ps(_mm_and_ps(ex_, abs_mask), _mm_and_ps(ey_, abs_mask))),
+                            _mm_set1_ps(0x1p-120f));  // (products that underflow)
+        minus_slack_ = _mm_xor_ps(slack_, _mm_set1_ps(-0.0f));
+    }
+    /// Row r's part of the edge functions, shared by the pixels of a row.
+    [[nodiscard]] __m128 row(int64_t r) const { return _mm_mul_ps(ex_, _mm_sub_ps(_mm_set1_ps(float(r)), y_)); }
+    /// What the ray of the pixel at column `col` of a row (its `row` part) can hit.
+    [[nodiscard]] Cover cover(int64_t col, __m128 row) const {
+        if (!known_) return kMay;
+        const __m128 e = _mm_sub_ps(row, _mm_mul_ps(ey_, _mm_sub_ps(_mm_set1_ps(float(col)), x_)));
+        const int below = _mm_movemask_ps(_mm_cmplt_ps(e, minus_slack_)), above = _mm_movemask_ps(_mm_cmpgt_ps(e, slack_));
+        if (below != 0 && above != 0) return kNone;
+        return below == 15 || above == 15 ? kInside : kMay;
+    }
+    [[nodiscard]] bool may_cover(int64_t col, int64_t r) const { return cover(col, row(r)) != kNone; }
+
+   private:
+    __m128 x_, y_, ex_, ey_, slack_, minus_slack_;
+#else
+    /// From the projected points (column, row, depth, flag); evaluated in double.
     Footprint(const float* a, const float* b, const float* c, float margin) : known_(a[3] + b[3] + c[3] == 0) {
         const float size = std::max(std::max(std::max(std::fabs(a[0]), std::fabs(a[1])), std::max(std::fabs(b[0]), std::fabs(b[1]))),
                                     std::max(std::fabs(c[0]), std::fabs(c[1])));
@@ -67,14 +112,15 @@ class Footprint {
         const Double4 zero{};
         slack_ = m * ((ex_ < zero ? -ex_ : ex_) + (ey_ < zero ? -ey_ : ey_));
     }
-    /// Whether the ray of the pixel centred at column x, row y may hit the triangle.
-    [[nodiscard]] bool may_cover(double x, double y) const {
-        const Double4 e = ex_ * (y - y_) - ey_ * (x - x_);
+    /// Whether the ray of the pixel centred at column col, row r may hit the triangle.
+    [[nodiscard]] bool may_cover(int64_t col, int64_t r) const {
+        const Double4 e = ex_ * (double(r) - y_) - ey_ * (double(col) - x_);
         return !known_ || !(any(e < -slack_) && any(e > slack_));
     }
 
    private:
     Double4 x_, y_, ex_, ey_, slack_;
+#endif
     bool known_;
 };
 
@@ -253,7 +299,12 @@ class ProjectedScene {
     /// Triangle i's footprint (leaf order; see Footprint).
     [[nodiscard]] Footprint footprint(uint32_t i) const {
         const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
+#if defined(__SSE4_1__)
+        const __m128 pa = _mm_load_ps((*this)[tri[0]]), pb = _mm_load_ps((*this)[tri[1]]), pc = _mm_load_ps((*this)[tri[2]]);
+        return Footprint(pa, pb, pc, _mm_min_ps(_mm_min_ps(pa, pb), pc), _mm_max_ps(_mm_max_ps(pa, pb), pc), margin_);
+#else
         return Footprint((*this)[tri[0]], (*this)[tri[1]], (*this)[tri[2]], margin_);
+#endif
     }
 
     /// Column, row and depth of point i, and 1 when it has no usable projection (else 0).

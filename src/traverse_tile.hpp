@@ -293,13 +293,16 @@ class TileTracer {
 
     /// Tests triangle i on the block's pixels in `rect`.
     void test_pixels(uint32_t i, const PixelRect& rect) {
-        scene_.prefetch_points(i);  // for the kernel, while the footprint is set up
-        const Footprint footprint = projected_.footprint(i);
+        std::optional<Footprint> footprint;  // set up once a pixel needs it (most are culled by depth)
         for (int64_t r = rect.r0; r <= rect.r1; ++r)
             for (int64_t c = rect.c0; c <= rect.c1; ++c) {
                 const int64_t j = c + r * kStride;
                 if (rect.near > depth_bound_[j]) continue;  // beyond this ray's hit
-                if (!footprint.may_cover(double(i0_ + c), double(r0_ + r))) continue;
+                if (!footprint) {
+                    scene_.prefetch_points(i);  // for the kernel, while the footprint is set up
+                    footprint.emplace(projected_.footprint(i));
+                }
+                if (!footprint->may_cover(i0_ + c, r0_ + r)) continue;
                 if (!kernel_[j]) make_ray(j);
                 const double before = bound_[j];
                 test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
