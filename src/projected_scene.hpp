@@ -242,9 +242,11 @@ class ProjectedScene {
     [[nodiscard]] Reach frame_triangle(const uint32_t tri[3], ImageRect& out) const {
         const float *a = (*this)[tri[0]], *b = (*this)[tri[1]], *c = (*this)[tri[2]];
 #if defined(__SSE4_1__)
-        store(triangle_rect(tri, out.near), out);
+        const __m128 pa = _mm_load_ps(a), pb = _mm_load_ps(b), pc = _mm_load_ps(c);
+        const __m128 hi = _mm_max_ps(_mm_max_ps(pa, pb), pc);
+        store(rect4(_mm_min_ps(_mm_min_ps(pa, pb), pc), hi, out.near), out);
         if (out.empty()) return Reach::none;
-        return a[3] + b[3] + c[3] != 0 ? Reach::unknown : Reach::rect;
+        return _mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) != 0 ? Reach::unknown : Reach::rect;
 #else
         const float lo_z = std::min(a[2], std::min(b[2], c[2])), hi_z = std::max(a[2], std::max(b[2], c[2]));
         const float near = lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_), far = hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_);
@@ -273,12 +275,6 @@ class ProjectedScene {
     }
 
 #if defined(__SSE4_1__)
-    /// Triangle `tri`'s rectangle as frame_triangle's, as floats (c0, c1, r0, r1), left
-    /// in a register for the tracer to clip.
-    [[nodiscard]] __m128 triangle_rect(const uint32_t tri[3], float& near) const {
-        const __m128 pa = _mm_load_ps((*this)[tri[0]]), pb = _mm_load_ps((*this)[tri[1]]), pc = _mm_load_ps((*this)[tri[2]]);
-        return rect4(_mm_min_ps(_mm_min_ps(pa, pb), pc), _mm_max_ps(_mm_max_ps(pa, pb), pc), near);
-    }
     /// The pixels (c0, c1, r0, r1 as floats, clamped as in rect4) whose centres lie within
     /// the margin of the box [lo, hi] of usable projected points: none when c0 > c1 or r0 > r1.
     [[nodiscard]] __m128 pixel_span(__m128 lo, __m128 hi) const {

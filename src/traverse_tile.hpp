@@ -258,7 +258,10 @@ class TileTracer {
         for (;;) {
             if (node->count != 0) {
                 projected_.prefetch_points(node->index, node->count);
-                test_leaf(packet, node->index, node->index + node->count);
+                for (uint32_t i = node->index, end = node->index + node->count; i < end; ++i) {
+                    const ImageRect q = projected_.triangle(i);
+                    if (overlaps(packet, q)) test_pixels(i, local(packet, q));
+                }
             } else {
                 const ProjectedNode* left = &projected_.node(node->index);
                 const bool vl = visible(packet, left[0].rect), vr = visible(packet, left[1].rect);
@@ -286,32 +289,6 @@ class TileTracer {
     [[nodiscard]] PixelRect local(const CameraRays::TilePixels& p, const ImageRect& q) const {
         return {std::max<int64_t>(q.c0, p.i0) - i0_, std::min<int64_t>(q.c1, p.i1) - i0_, std::max<int64_t>(q.r0, p.r0) - r0_,
                 std::min<int64_t>(q.r1, p.r1) - r0_, q.near};
-    }
-
-    /// Tests a leaf's triangles first..end - 1 on the packet's pixels their rectangles meet.
-    void test_leaf(const CameraRays::TilePixels& packet, uint32_t first, uint32_t end) {
-#if defined(__SSE4_1__)
-        // (the rectangles clipped to the packet in registers: cheaper than ImageRect's
-        // 16-bit fields, overlaps and local, which showed in callgrind's profile)
-        const __m128 bounds = _mm_setr_ps(float(packet.i0), float(packet.i1), float(packet.r0), float(packet.r1));
-        const __m128i origin = _mm_setr_epi32(int32_t(i0_), int32_t(i0_), int32_t(r0_), int32_t(r0_));
-        for (uint32_t i = first; i < end; ++i) {
-            float near;
-            const __m128 q = projected_.triangle_rect(scene_.triangles.data() + 3 * std::size_t(i), near);
-            const __m128 v = _mm_blend_ps(_mm_max_ps(q, bounds), _mm_min_ps(q, bounds), 0b1010);  // (c0, c1, r0, r1)
-            if (_mm_movemask_ps(_mm_cmpgt_ps(v, _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 3, 0, 1)))) & 0b0101) continue;
-            alignas(16) int32_t p[4];
-            _mm_store_si128(reinterpret_cast<__m128i*>(p), _mm_sub_epi32(_mm_cvtps_epi32(v), origin));
-            // a single pixel beyond its ray's hit is culled without a call (the usual case)
-            if (p[0] == p[1] && p[2] == p[3] && double(near) > depth_bound_[p[0] + p[2] * kStride]) continue;
-            test_pixels(i, {p[0], p[1], p[2], p[3], near});
-        }
-#else
-        for (uint32_t i = first; i < end; ++i) {
-            const ImageRect q = projected_.triangle(i);
-            if (overlaps(packet, q)) test_pixels(i, local(packet, q));
-        }
-#endif
     }
 
     /// Tests triangle i on the block's pixels in `rect`.
