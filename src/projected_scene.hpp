@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <utility>
 #include <vector>
 #if defined(__SSE4_1__)
 #include <immintrin.h>
@@ -249,7 +250,7 @@ class ProjectedScene {
         return _mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) != 0 ? Reach::unknown : Reach::rect;
 #else
         const float lo_z = std::min(a[2], std::min(b[2], c[2])), hi_z = std::max(a[2], std::max(b[2], c[2]));
-        const float near = lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_), far = hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_);
+        const auto [near, far] = depth_bounds(lo_z, hi_z);
         out = kNoPixels;
         if (near > far_ || far < near_) return Reach::none;
         out.near = near;
@@ -275,8 +276,9 @@ class ProjectedScene {
     }
 
 #if defined(__SSE4_1__)
-    /// The pixels (c0, c1, r0, r1 as floats, clamped as in rect4) whose centres lie within
-    /// the margin of the box [lo, hi] of usable projected points: none when c0 > c1 or r0 > r1.
+    /// The pixels (c0, c1, r0, r1 as floats, clamped to [0, n] and [-1, n - 1]) whose
+    /// centres lie within the margin of the box [lo, hi] of usable projected points: none
+    /// when c0 > c1 or r0 > r1.
     [[nodiscard]] __m128 pixel_span(__m128 lo, __m128 hi) const {
         const __m128 v = _mm_add_ps(_mm_unpacklo_ps(lo, hi), margin4_);
         return _mm_min_ps(_mm_max_ps(_mm_blend_ps(_mm_ceil_ps(v), _mm_floor_ps(v), 0b1010), floor4_), ceil4_);
@@ -285,7 +287,7 @@ class ProjectedScene {
     /// A lower bound on depths within [lo_z, hi_z] (stored point depths, see rect4), or
     /// HUGE_VALF when they all lie outside the camera's [near, far].
     [[nodiscard]] float near_bound(float lo_z, float hi_z) const {
-        const float near = lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_), far = hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_);
+        const auto [near, far] = depth_bounds(lo_z, hi_z);
         return near > far_ || far < near_ ? HUGE_VALF : near;
     }
 
@@ -367,10 +369,9 @@ class ProjectedScene {
     /// [-1, n - 1]; every pixel when a point has no usable projection.
     __m128 rect4(__m128 lo, __m128 hi, float& near) const {
         const float lo_z = _mm_cvtss_f32(_mm_movehl_ps(lo, lo)), hi_z = _mm_cvtss_f32(_mm_movehl_ps(hi, hi));
-        near = lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_);
-        const float far = hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_);
-        __m128 v = _mm_add_ps(_mm_unpacklo_ps(lo, hi), margin4_);
-        v = _mm_min_ps(_mm_max_ps(_mm_blend_ps(_mm_ceil_ps(v), _mm_floor_ps(v), 0b1010), floor4_), ceil4_);
+        const auto [lo_depth, far] = depth_bounds(lo_z, hi_z);
+        near = lo_depth;
+        __m128 v = pixel_span(lo, hi);
         const __m128 unknown = _mm_cmpneq_ps(_mm_shuffle_ps(hi, hi, _MM_SHUFFLE(3, 3, 3, 3)), _mm_setzero_ps());
         v = _mm_blendv_ps(v, any4_, unknown);
         // empty: c0 > c1 or r0 > r1, or every depth outside [near, far]
@@ -385,6 +386,11 @@ class ProjectedScene {
         _mm_storel_epi64(reinterpret_cast<__m128i*>(&rect), _mm_packus_epi32(_mm_cvtps_epi32(v), _mm_setzero_si128()));
     }
 #endif
+
+    /// Bounds {near, far} on the depths within [lo_z, hi_z] of stored point depths (see rect4).
+    [[nodiscard]] std::pair<float, float> depth_bounds(float lo_z, float hi_z) const {
+        return {lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_), hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_)};
+    }
 
     /// Leaf i's rectangle: that of all its points, which holds each triangle's at a third
     /// of the work.
