@@ -82,8 +82,14 @@ def machine_lines() -> list[str]:
     import vtkraycast
 
     versions = [f"vtkraycast {vtkraycast.__version__}"]
-    for name, module in (("numpy", "numpy"), ("vtk", "vtk"), ("pyvista", "pyvista"), ("open3d", "open3d"),
-                         ("embreex", "embreex"), ("libigl", "igl")):
+    for name, module in (
+        ("numpy", "numpy"),
+        ("vtk", "vtk"),
+        ("pyvista", "pyvista"),
+        ("open3d", "open3d"),
+        ("embreex", "embreex"),
+        ("libigl", "igl"),
+    ):
         try:
             versions.append(f"{name} {metadata.version(name)}")
         except metadata.PackageNotFoundError:
@@ -110,16 +116,19 @@ def source_line() -> str:
 
     def git(*cmd: str) -> str:
         try:
-            return subprocess.run(["git", "-C", str(repo), *cmd], capture_output=True, text=True,
-                                  timeout=10).stdout.strip()
+            return subprocess.run(
+                ["git", "-C", str(repo), *cmd], capture_output=True, text=True, timeout=10
+            ).stdout.strip()
         except (OSError, subprocess.SubprocessError):
             return ""
 
     head = git("log", "-1", "--format=%h (%ad) %s", "--date=iso") or "unknown"
     dirty = git("status", "--porcelain", "--", "src", "vtkraycast", "CMakeLists.txt", "pyproject.toml")
     built = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(os.path.getmtime(_core.__file__)))
-    return (f"source: commit {head}{'; package sources modified since' if dirty else ''}; "
-            f"installed native core built {built}")
+    return (
+        f"source: commit {head}{'; package sources modified since' if dirty else ''}; "
+        f"installed native core built {built}"
+    )
 
 
 def log(msg: str) -> None:
@@ -165,8 +174,15 @@ def rays_hitting_box(origins: np.ndarray, dirs: np.ndarray, bounds: np.ndarray) 
 # ----------------------------------------------------------------------------------------
 
 
-def exact_reference(points: np.ndarray, triangles: np.ndarray, eye: np.ndarray, dirs: np.ndarray,
-                    *, tmin: float = 0.0, tmax: float = math.inf) -> Any:
+def exact_reference(
+    points: np.ndarray,
+    triangles: np.ndarray,
+    eye: np.ndarray,
+    dirs: np.ndarray,
+    *,
+    tmin: float = 0.0,
+    tmax: float = math.inf,
+) -> Any:
     """``exact_first_hits`` for rays sharing the origin ``eye``, each ray tested only against
     the triangles whose projection may cover it (see the module docstring)."""
     from vtkraycast.validate import ExactHits, exact_first_hits
@@ -182,8 +198,8 @@ def exact_reference(points: np.ndarray, triangles: np.ndarray, eye: np.ndarray, 
     if n == 0 or triangles.shape[0] == 0:
         return ExactHits(accepted, t_out, bary_out, on_edge)
     eps = np.finfo(np.float64).eps
-    rel = points - eye                                   # rounded differences
-    err = 2 * eps * (np.abs(points) + np.abs(eye))        # bound on their rounding error
+    rel = points - eye  # rounded differences
+    err = 2 * eps * (np.abs(points) + np.abs(eye))  # bound on their rounding error
     axis = np.argmax(np.abs(dirs), axis=1)
     sign = np.sign(dirs[np.arange(n), axis])
     for k in range(3):
@@ -242,8 +258,9 @@ def exact_reference(points: np.ndarray, triangles: np.ndarray, eye: np.ndarray, 
                 which = rays[ray_cell == cell]
                 if subset.size == 0:
                     continue
-                hits = exact_first_hits(points, triangles[subset], np.broadcast_to(eye, (which.size, 3)),
-                                        dirs[which], tmin=tmin, tmax=tmax)
+                hits = exact_first_hits(
+                    points, triangles[subset], np.broadcast_to(eye, (which.size, 3)), dirs[which], tmin=tmin, tmax=tmax
+                )
                 for q, w in enumerate(which.tolist()):
                     if hits.accepted[q]:
                         accepted[w] = frozenset(int(subset[x]) for x in hits.accepted[q])
@@ -287,11 +304,11 @@ def timed(fn: Callable[[], Any], repeats: int, budget: float) -> tuple[list[floa
 @dataclass
 class Row:
     scene: str
-    kind: str            # "camera" or "rays"
+    kind: str  # "camera" or "rays"
     stress: bool
     n_triangles: int
     method: str
-    family: str          # "vtkraycast" or "peer"
+    family: str  # "vtkraycast" or "peer"
     strategy: str = ""
     precision: str = ""
     accel: str = ""
@@ -310,7 +327,7 @@ class Row:
     leak_rate: float = math.nan
     wrong: int = 0
     wrong_rate: float = math.nan
-    wrong_side: int = 0   # the returned triangle is not met by the exact ray at all
+    wrong_side: int = 0  # the returned triangle is not met by the exact ray at all
     wrong_depth: int = 0  # it is met, but farther than the exact first hit (depth order)
     wrong_depth_beyond_tie: int = 0  # ... by more than 32 eps of the method's precision
     wrong_depth_max_gap: float = math.nan  # largest relative t gap of those depth errors
@@ -329,9 +346,18 @@ class Row:
 CSV_FIELDS = [f for f in Row.__dataclass_fields__ if f not in ("t_errors", "examples")]
 
 
-def score(row: Row, ref: Any, sample: np.ndarray, res: Result, must_hit: bool,
-          origins: np.ndarray, dirs: np.ndarray, all_ids: np.ndarray | None,
-          geometry: tuple[np.ndarray, np.ndarray], tie: float) -> None:
+def score(
+    row: Row,
+    ref: Any,
+    sample: np.ndarray,
+    res: Result,
+    must_hit: bool,
+    origins: np.ndarray,
+    dirs: np.ndarray,
+    all_ids: np.ndarray | None,
+    geometry: tuple[np.ndarray, np.ndarray],
+    tie: float,
+) -> None:
     """Fills the error columns of ``row``: ``res`` holds the method's answers on the sampled
     rays; ``all_ids`` its ids on every ray (for must-hit scenes), or None. A wrong triangle
     is checked exactly: "side" when the ray does not meet it at all (an inside test decided
@@ -351,11 +377,12 @@ def score(row: Row, ref: Any, sample: np.ndarray, res: Result, must_hit: bool,
     wrong_kind = {}
     for q in np.flatnonzero(masks["wrong"]).tolist():
         k = int(sample[q])
-        one = exact_first_hits(points, triangles[[int(ids[q])]], origins[k:k + 1], dirs[k:k + 1])
+        one = exact_first_hits(points, triangles[[int(ids[q])]], origins[k : k + 1], dirs[k : k + 1])
         if one.accepted[0]:
             gap = (float(one.t[0]) - float(ref.t[q])) / abs(float(ref.t[q]))
-            wrong_kind[q] = (f"wrong-depth (its exact t is {gap:.1e} relative beyond the first hit; "
-                             f"tie tolerance {tie:.1e})")
+            wrong_kind[q] = (
+                f"wrong-depth (its exact t is {gap:.1e} relative beyond the first hit; tie tolerance {tie:.1e})"
+            )
             row.wrong_depth += 1
             row.wrong_depth_beyond_tie += int(gap > tie)
             row.wrong_depth_max_gap = gap if math.isnan(row.wrong_depth_max_gap) else max(row.wrong_depth_max_gap, gap)
@@ -406,7 +433,7 @@ def score(row: Row, ref: Any, sample: np.ndarray, res: Result, must_hit: bool,
 class SceneSpec:
     name: str
     mesh: Callable[[], Any]
-    camera: Callable[[Any], Any] | None = None         # mesh -> vrc.Camera
+    camera: Callable[[Any], Any] | None = None  # mesh -> vrc.Camera
     rays: Callable[[Any, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
     must_hit: bool = False
     stress: bool = False
@@ -441,9 +468,14 @@ def build_scenes(quick: bool) -> list[SceneSpec]:
     for name in ("airplane", "ant", "nut", "sphere"):
         scenes.append(SceneSpec(name, getattr(examples, f"load_{name}"), camera=framing, n_ref=n_ref))
     if not quick:
-        scenes.append(SceneSpec(
-            "frog contour", lambda: examples.load_frog_tissues().contour_labels(),
-            camera=lambda m: vrc.Camera.framing(m.bounds, view="iso", nx=1024, ny=1024), n_ref=n_ref))
+        scenes.append(
+            SceneSpec(
+                "frog contour",
+                lambda: examples.load_frog_tissues().contour_labels(),
+                camera=lambda m: vrc.Camera.framing(m.bounds, view="iso", nx=1024, ny=1024),
+                n_ref=n_ref,
+            )
+        )
 
     combos = [(0.0, 1.0), (0.0, 1e-4), (0.0, 1e-6), (1e3, 1.0), (1e3, 1e-4), (1e6, 1.0), (1e6, 1e-6)]
     if quick:
@@ -468,15 +500,29 @@ def build_scenes(quick: bool) -> list[SceneSpec]:
     # closed bumpy spheres seen from their centre (strictly inside): rays at every vertex
     # and edge midpoint
     for offset, scale in combos:
-        scenes.append(SceneSpec(
-            f"inside bumpy s{sub} {label(offset, scale)}", sphere(sub, offset, scale),
-            rays=rays_from(np.full(3, offset)), must_hit=True, stress=True, n_ref=n_ref_stress,
-            max_rays=degenerate_cap.get((offset, scale), cap)))
+        scenes.append(
+            SceneSpec(
+                f"inside bumpy s{sub} {label(offset, scale)}",
+                sphere(sub, offset, scale),
+                rays=rays_from(np.full(3, offset)),
+                must_hit=True,
+                stress=True,
+                n_ref=n_ref_stress,
+                max_rays=degenerate_cap.get((offset, scale), cap),
+            )
+        )
     # a small closed sphere, every ray referenced, accel="none" too
-    for offset, scale in ([(0.0, 1.0), (1e6, 1e-6)] if not quick else []):
-        scenes.append(SceneSpec(
-            f"inside bumpy s3 {label(offset, scale)}", sphere(3, offset, scale),
-            rays=rays_from(np.full(3, offset)), must_hit=True, stress=True, n_ref=10**9))
+    for offset, scale in [(0.0, 1.0), (1e6, 1e-6)] if not quick else []:
+        scenes.append(
+            SceneSpec(
+                f"inside bumpy s3 {label(offset, scale)}",
+                sphere(3, offset, scale),
+                rays=rays_from(np.full(3, offset)),
+                must_hit=True,
+                stress=True,
+                n_ref=10**9,
+            )
+        )
 
     # a perspective camera inside a closed bumpy sphere: every pixel must hit
     def inside_camera(offset: float, scale: float) -> Callable[[Any], Any]:
@@ -485,18 +531,26 @@ def build_scenes(quick: bool) -> list[SceneSpec]:
         side = 20 if (offset, scale) in degenerate_cap else px  # degenerate BVH: ~1.5 ms a ray
         return lambda mesh: vrc.Camera(eye, look, (0, 0, 1), view_angle=90, nx=side, ny=side)
 
-    for offset, scale in ([(0.0, 1.0), (1e6, 1e-6)] if not quick else [(0.0, 1.0)]):
-        scenes.append(SceneSpec(
-            f"camera inside bumpy s{sub} {label(offset, scale)}", sphere(sub, offset, scale),
-            camera=inside_camera(offset, scale), must_hit=True, stress=True, n_ref=n_ref_stress))
+    for offset, scale in [(0.0, 1.0), (1e6, 1e-6)] if not quick else [(0.0, 1.0)]:
+        scenes.append(
+            SceneSpec(
+                f"camera inside bumpy s{sub} {label(offset, scale)}",
+                sphere(sub, offset, scale),
+                camera=inside_camera(offset, scale),
+                must_hit=True,
+                stress=True,
+                n_ref=n_ref_stress,
+            )
+        )
 
     # grazing: a camera just above a tilted plane, looking along it
     rot = rotation(0.3, -0.2, 0.5)
     res = 40 if quick else 150
 
     def tilted_plane() -> Any:
-        plane = pv.Plane(center=(0, 0, 0), direction=(0, 0, 1), i_size=2, j_size=2,
-                         i_resolution=res, j_resolution=res).triangulate()
+        plane = pv.Plane(
+            center=(0, 0, 0), direction=(0, 0, 1), i_size=2, j_size=2, i_resolution=res, j_resolution=res
+        ).triangulate()
         p = np.array(plane.points, dtype=np.float64)
         p[:, 2] = 0.0
         plane.points = p @ rot.T
@@ -507,17 +561,22 @@ def build_scenes(quick: bool) -> list[SceneSpec]:
         # a 0.5 degree view centred on the plane's middle sees mostly such grazing hits
         eye = rot @ np.array([-1.3, 0.05, 2e-3])
         side = 64 if quick else 192  # grazing rays cross many BVH nodes: ~25 us a ray here
-        return vrc.Camera(eye, rot @ np.array([0.0, 0.0, 0.0]), rot @ np.array([0.0, 0.0, 1.0]),
-                          view_angle=0.5, nx=side, ny=side)
+        return vrc.Camera(
+            eye, rot @ np.array([0.0, 0.0, 0.0]), rot @ np.array([0.0, 0.0, 1.0]), view_angle=0.5, nx=side, ny=side
+        )
 
-    scenes.append(SceneSpec("grazing camera over tilted plane", tilted_plane, camera=grazing_camera,
-                            stress=True, n_ref=n_ref_stress))
+    scenes.append(
+        SceneSpec(
+            "grazing camera over tilted plane", tilted_plane, camera=grazing_camera, stress=True, n_ref=n_ref_stress
+        )
+    )
 
     # grazing at vertices and edges: an eye 1e-9 above the plane z = 0, rays aimed at its
     # interior vertices and edge midpoints (every ray must hit, at t = 1)
     def flat_plane() -> Any:
-        plane = pv.Plane(center=(0, 0, 0), direction=(0, 0, 1), i_size=2, j_size=2,
-                         i_resolution=res, j_resolution=res).triangulate()
+        plane = pv.Plane(
+            center=(0, 0, 0), direction=(0, 0, 1), i_size=2, j_size=2, i_resolution=res, j_resolution=res
+        ).triangulate()
         p = np.array(plane.points, dtype=np.float64)
         p[:, 2] = 0.0
         plane.points = p
@@ -530,8 +589,17 @@ def build_scenes(quick: bool) -> list[SceneSpec]:
         inner = (np.abs(target[:, :2]) < 0.999).all(axis=1)
         return o[inner], d[inner]
 
-    scenes.append(SceneSpec("grazing rays at plane vertices/edges", flat_plane, rays=plane_rays,
-                            must_hit=True, stress=True, n_ref=n_ref_stress, max_rays=cap))
+    scenes.append(
+        SceneSpec(
+            "grazing rays at plane vertices/edges",
+            flat_plane,
+            rays=plane_rays,
+            must_hit=True,
+            stress=True,
+            n_ref=n_ref_stress,
+            max_rays=cap,
+        )
+    )
 
     # rays tangent to a bumpy sphere: from outside, at the vertices and edge midpoints on
     # the silhouette
@@ -544,8 +612,11 @@ def build_scenes(quick: bool) -> list[SceneSpec]:
         keep = cos < 0.05
         return o[keep], d[keep]
 
-    scenes.append(SceneSpec(f"tangent rays bumpy s{sub}", sphere(sub, 0.0, 1.0), rays=tangent_rays,
-                            stress=True, n_ref=n_ref_stress))
+    scenes.append(
+        SceneSpec(
+            f"tangent rays bumpy s{sub}", sphere(sub, 0.0, 1.0), rays=tangent_rays, stress=True, n_ref=n_ref_stress
+        )
+    )
     return scenes
 
 
@@ -555,9 +626,11 @@ def build_scenes(quick: bool) -> list[SceneSpec]:
 
 
 def log_row(row: Row) -> None:
-    log(f"  {row.method:45s} {row.mrays_s:7.2f} Mrays/s  leaks {row.leaks}/{row.leak_rays}  "
+    log(
+        f"  {row.method:45s} {row.mrays_s:7.2f} Mrays/s  leaks {row.leaks}/{row.leak_rays}  "
         f"wrong {row.wrong}/{row.ref_hits} (side {row.wrong_side}, depth {row.wrong_depth})  "
-        f"false {row.false_hits}  t 99.9% {row.t_rel_p999:.1e}")
+        f"false {row.false_hits}  t 99.9% {row.t_rel_p999:.1e}"
+    )
 
 
 def _cost_per_ray(call: Callable[[int], Any], n_small: int, n_large: int, n_full: int, budget: float) -> float:
@@ -582,20 +655,24 @@ def fit_camera(scene: Any, cam: Any, args: argparse.Namespace) -> tuple[Any, str
     worst = 0.0
     n_full = cam.nx * cam.ny
     for strategy in ("watertight", "plane"):
+
         def call(n: int, strategy: str = strategy) -> Any:
             side = int(math.sqrt(n))
             return scene.buffers(cam.replace(nx=side, ny=side), arrays=["TriangleId"], strategy=strategy)
+
         worst = max(worst, _cost_per_ray(call, 32 * 32, 128 * 128, n_full, args.camera_budget))
     if worst * n_full <= args.camera_budget:
         return cam, ""
     f = math.sqrt(args.call_budget / (worst * cam.nx * cam.ny))
     small = cam.replace(nx=max(8, int(cam.nx * f)), ny=max(8, int(cam.ny * f)))
-    return small, (f"camera reduced from {cam.nx}x{cam.ny} to {small.nx}x{small.ny}: "
-                   f"{worst * 1e6:.1f} us per ray in a pilot cast")
+    return small, (
+        f"camera reduced from {cam.nx}x{cam.ny} to {small.nx}x{small.ny}: {worst * 1e6:.1f} us per ray in a pilot cast"
+    )
 
 
-def fit_rays(scene: Any, origins: np.ndarray, dirs: np.ndarray, args: argparse.Namespace,
-             rng: np.random.Generator) -> tuple[np.ndarray | None, str]:
+def fit_rays(
+    scene: Any, origins: np.ndarray, dirs: np.ndarray, args: argparse.Namespace, rng: np.random.Generator
+) -> tuple[np.ndarray | None, str]:
     """A guard for slower machines: a seeded random subset of the rays (about
     ``args.call_budget`` seconds a call) when one ``intersect`` of them all with the slowest
     vtkraycast kernel would take longer than ``args.guard_budget``, else None."""
@@ -603,8 +680,10 @@ def fit_rays(scene: Any, origins: np.ndarray, dirs: np.ndarray, args: argparse.N
     order = rng.permutation(n)
     worst = 0.0
     for strategy in ("watertight", "plane"):
+
         def call(m: int, strategy: str = strategy) -> Any:
             return scene.intersect(origins[order[:m]], dirs[order[:m]], strategy=strategy)
+
         worst = max(worst, _cost_per_ray(call, min(n, 1000), min(n, 10000), n, args.guard_budget))
     if worst * n <= args.guard_budget:
         return None, ""
@@ -652,8 +731,10 @@ def run_scene(spec: SceneSpec, peers: list[Peer], args: argparse.Namespace, rng:
     t0 = time.perf_counter()
     ref = exact_reference(points, triangles, eye, dirs[sample])
     hit_ref = np.array([bool(a) for a in ref.accepted])
-    log(f"  reference {time.perf_counter() - t0:.1f} s: {hit_ref.sum()} hits, "
-        f"{int(ref.on_edge.sum())} through an edge or vertex")
+    log(
+        f"  reference {time.perf_counter() - t0:.1f} s: {hit_ref.sum()} hits, "
+        f"{int(ref.on_edge.sum())} through an edge or vertex"
+    )
     if spec.must_hit and not hit_ref.all():
         log(f"  WARNING: {int((~hit_ref).sum())} sampled rays miss in a must-hit scene")
     rows: list[Row] = []
@@ -667,9 +748,16 @@ def run_scene(spec: SceneSpec, peers: list[Peer], args: argparse.Namespace, rng:
             continue
         for strategy in vrc.STRATEGIES:
             for precision in ("float64", "float32"):
-                row = Row(**base, method=vrc_name(strategy, precision, accel), family="vtkraycast",
-                          strategy=strategy, precision=precision, accel=accel, threads=os.cpu_count() or 1,
-                          prep_s=prep)
+                row = Row(
+                    **base,
+                    method=vrc_name(strategy, precision, accel),
+                    family="vtkraycast",
+                    strategy=strategy,
+                    precision=precision,
+                    accel=accel,
+                    threads=os.cpu_count() or 1,
+                    prep_s=prep,
+                )
                 opts = dict(strategy=strategy, precision=precision, accel=accel)
                 all_ids = None
                 if cam is not None:
@@ -678,15 +766,18 @@ def run_scene(spec: SceneSpec, peers: list[Peer], args: argparse.Namespace, rng:
                         f = args.brute_force_downsample
                         tcam = cam.replace(nx=max(1, cam.nx // f), ny=max(1, cam.ny // f))
                         row.note = f"timed at {tcam.nx}x{tcam.ny}; errors from intersect on the sampled rays"
-                    times, img = timed(lambda c=tcam, o=opts: scene.cast(c, arrays=arrays, **o), args.repeats,
-                                       args.budget)
+                    times, img = timed(
+                        lambda c=tcam, o=opts: scene.cast(c, arrays=arrays, **o), args.repeats, args.budget
+                    )
                     row.n_rays_timed = tcam.nx * tcam.ny
                     ids_full = np.asarray(img["TriangleId"])
                     row.hit_fraction = float((ids_full >= 0).mean())
                     if accel == "bvh":
-                        res = Result(ids_full[sample].astype(np.int64),
-                                     np.asarray(img["Depth"], np.float64)[sample] / cam.d,
-                                     np.asarray(img["Barycentric"], np.float64)[sample])
+                        res = Result(
+                            ids_full[sample].astype(np.int64),
+                            np.asarray(img["Depth"], np.float64)[sample] / cam.d,
+                            np.asarray(img["Barycentric"], np.float64)[sample],
+                        )
                         all_ids = ids_full
                         # the camera rays made here must be the core's own rays
                         check = scene.intersect(origins[sample], dirs[sample], **opts)
@@ -702,15 +793,26 @@ def run_scene(spec: SceneSpec, peers: list[Peer], args: argparse.Namespace, rng:
                     row.n_rays_timed = n
                     all_ids = h["triangle_id"]
                     row.hit_fraction = float((all_ids >= 0).mean())
-                    res = Result(all_ids[sample], h["t"].astype(np.float64)[sample],
-                                 h["barycentric"].astype(np.float64)[sample])
+                    res = Result(
+                        all_ids[sample], h["t"].astype(np.float64)[sample], h["barycentric"].astype(np.float64)[sample]
+                    )
                     h = None
                 row.repeats = len(times)
                 row.time_median_s = float(np.median(times))
                 row.time_min_s = float(np.min(times))
                 row.mrays_s = row.n_rays_timed / row.time_median_s / 1e6
-                score(row, ref, sample, res, spec.must_hit, origins, dirs, all_ids, geometry,
-                      32 * float(np.finfo(precision).eps))
+                score(
+                    row,
+                    ref,
+                    sample,
+                    res,
+                    spec.must_hit,
+                    origins,
+                    dirs,
+                    all_ids,
+                    geometry,
+                    32 * float(np.finfo(precision).eps),
+                )
                 row.note = "; ".join(x for x in (scene_note, row.note) if x)
                 img = None
                 rows.append(row)
@@ -740,8 +842,18 @@ def run_scene(spec: SceneSpec, peers: list[Peer], args: argparse.Namespace, rng:
         row.mrays_s = n / row.time_median_s / 1e6
         row.hit_fraction = float((res_all.ids >= 0).mean())
         res = Result(res_all.ids[sample], res_all.t[sample], res_all.bary[sample])
-        score(row, ref, sample, res, spec.must_hit, origins, dirs, res_all.ids, geometry,
-              32 * float(np.finfo(peer.precision).eps))
+        score(
+            row,
+            ref,
+            sample,
+            res,
+            spec.must_hit,
+            origins,
+            dirs,
+            res_all.ids,
+            geometry,
+            32 * float(np.finfo(peer.precision).eps),
+        )
         row.note = "; ".join(x for x in (scene_note, row.note) if x)
         rows.append(row)
         log_row(row)
@@ -782,25 +894,36 @@ def aggregate(rows: list[Row]) -> list[dict[str, Any]]:
         s_leaks, s_leak_rays = sum(r.leaks for r in stress), sum(r.leak_rays for r in stress)
         s_wrong, s_hits = sum(r.wrong for r in stress), sum(r.ref_hits for r in stress)
         bary = [r.bary_max_err for r in ok if not math.isnan(r.bary_max_err)]
-        out.append(dict(
-            method=name, family=rs[0].family, threads=rs[0].threads, scenes=len(ok),
-            mrays_camera=float(np.median(cam)) if cam else math.nan,
-            mrays_frog=frog[0] if frog else math.nan,
-            mrays_camera_best=float(np.median(cam_best)) if cam_best else math.nan,
-            mrays_frog_best=frog_best[0] if frog_best else math.nan,
-            leaks=leaks, leak_rays=leak_rays, leak_rate=leaks / max(leak_rays, 1),
-            wrong=wrong, ref_hits=ref_hits, wrong_rate=wrong / max(ref_hits, 1),
-            wrong_side=sum(r.wrong_side for r in ok), wrong_depth=sum(r.wrong_depth for r in ok),
-            wrong_depth_beyond=sum(r.wrong_depth_beyond_tie for r in ok),
-            depth_gap=max([r.wrong_depth_max_gap for r in ok if not math.isnan(r.wrong_depth_max_gap)],
-                          default=math.nan),
-            false_hits=sum(r.false_hits for r in ok),
-            stress_error=s_leaks / max(s_leak_rays, 1) + s_wrong / max(s_hits, 1),
-            t_med=float(np.median(terr)) if terr.size else math.nan,
-            t_p999=float(np.quantile(terr, 0.999)) if terr.size else math.nan,
-            t_max=float(terr.max()) if terr.size else math.nan,
-            bary_max=max(bary) if bary else math.nan,
-        ))
+        out.append(
+            dict(
+                method=name,
+                family=rs[0].family,
+                threads=rs[0].threads,
+                scenes=len(ok),
+                mrays_camera=float(np.median(cam)) if cam else math.nan,
+                mrays_frog=frog[0] if frog else math.nan,
+                mrays_camera_best=float(np.median(cam_best)) if cam_best else math.nan,
+                mrays_frog_best=frog_best[0] if frog_best else math.nan,
+                leaks=leaks,
+                leak_rays=leak_rays,
+                leak_rate=leaks / max(leak_rays, 1),
+                wrong=wrong,
+                ref_hits=ref_hits,
+                wrong_rate=wrong / max(ref_hits, 1),
+                wrong_side=sum(r.wrong_side for r in ok),
+                wrong_depth=sum(r.wrong_depth for r in ok),
+                wrong_depth_beyond=sum(r.wrong_depth_beyond_tie for r in ok),
+                depth_gap=max(
+                    [r.wrong_depth_max_gap for r in ok if not math.isnan(r.wrong_depth_max_gap)], default=math.nan
+                ),
+                false_hits=sum(r.false_hits for r in ok),
+                stress_error=s_leaks / max(s_leak_rays, 1) + s_wrong / max(s_hits, 1),
+                t_med=float(np.median(terr)) if terr.size else math.nan,
+                t_p999=float(np.quantile(terr, 0.999)) if terr.size else math.nan,
+                t_max=float(terr.max()) if terr.size else math.nan,
+                bary_max=max(bary) if bary else math.nan,
+            )
+        )
     return out
 
 
@@ -812,12 +935,16 @@ def write_csv(rows: list[Row], path: Path) -> None:
             w.writerow({k: getattr(r, k) for k in CSV_FIELDS})
 
 
-def write_markdown(rows: list[Row], agg: list[dict[str, Any]], path: Path, header: list[str],
-                   wall: float, args: argparse.Namespace) -> str:
+def write_markdown(
+    rows: list[Row], agg: list[dict[str, Any]], path: Path, header: list[str], wall: float, args: argparse.Namespace
+) -> str:
     lines = ["# vtkraycast: run time against error", ""]
     lines += [f"- {h}" for h in header]
-    lines += [f"- wall time: {wall:.0f} s; repeats: median of {args.repeats} timed runs after a warm-up; "
-              "load average at the end: " + ", ".join(f"{x:.2f}" for x in os.getloadavg()), ""]
+    lines += [
+        f"- wall time: {wall:.0f} s; repeats: median of {args.repeats} timed runs after a warm-up; "
+        "load average at the end: " + ", ".join(f"{x:.2f}" for x in os.getloadavg()),
+        "",
+    ]
     lines += [
         "Per method over all scenes. Mrays/s: median over the camera-ray scenes (perspective "
         "cameras, every pixel; vtkraycast's `Scene.cast` with TriangleId, Depth and Barycentric), and on "
@@ -844,12 +971,18 @@ def write_markdown(rows: list[Row], agg: list[dict[str, Any]], path: Path, heade
             f"{fmt(a['wrong_rate'])} ({a['wrong']}/{a['ref_hits']}) | "
             f"{a['wrong_side']} / {a['wrong_depth']} ({a['wrong_depth_beyond']} beyond tie; "
             f"max gap {fmt(a['depth_gap'])}) | "
-            f"{a['false_hits']} | {fmt(a['t_med'])} | {fmt(a['t_p999'])} | {fmt(a['t_max'])} | {fmt(a['bary_max'])} |")
+            f"{a['false_hits']} | {fmt(a['t_med'])} | {fmt(a['t_p999'])} | {fmt(a['t_max'])} | {fmt(a['bary_max'])} |"
+        )
     stress_scenes = list(dict.fromkeys(r.scene for r in rows if r.stress))
     if stress_scenes:
-        lines += ["", "## Stress scenes: leaks / wrong triangles", "",
-                  "Each cell is `leaks/wrong`; the header gives the rays checked for leaks and the "
-                  "reference sample that hit (the denominator of wrong). `.` means not run.", ""]
+        lines += [
+            "",
+            "## Stress scenes: leaks / wrong triangles",
+            "",
+            "Each cell is `leaks/wrong`; the header gives the rays checked for leaks and the "
+            "reference sample that hit (the denominator of wrong). `.` means not run.",
+            "",
+        ]
         info = {}
         for s in stress_scenes:
             r = next(r for r in rows if r.scene == s and r.family == "vtkraycast")
@@ -864,28 +997,39 @@ def write_markdown(rows: list[Row], agg: list[dict[str, Any]], path: Path, heade
             if any(c != "." for c in cells):
                 lines.append(f"| {a['method']} | " + " | ".join(cells) + " |")
     scenes = list(dict.fromkeys(r.scene for r in rows))
-    lines += ["", "## Mrays/s per scene", "",
-              "| method | " + " | ".join(scenes) + " |", "|---|" + "---:|" * len(scenes)]
+    lines += [
+        "",
+        "## Mrays/s per scene",
+        "",
+        "| method | " + " | ".join(scenes) + " |",
+        "|---|" + "---:|" * len(scenes),
+    ]
     for a in agg:
         cells = []
         for s in scenes:
             r = next((r for r in rows if r.scene == s and r.method == a["method"]), None)
             cells.append("." if r is None else fmt(r.mrays_s, "f"))
         lines.append(f"| {a['method']} | " + " | ".join(cells) + " |")
-    ex = [(r, e) for r in rows for e in r.examples if r.family == "vtkraycast"
-          and r.strategy in ("auto", "watertight")]
+    ex = [(r, e) for r in rows for e in r.examples if r.family == "vtkraycast" and r.strategy in ("auto", "watertight")]
     if ex:
-        lines += ["", "## Reproducers: errors of the strategies claimed exact (watertight, auto)", "",
-                  "`Scene(mesh).intersect(origin, direction, strategy=..., precision=...)` on the scene's mesh "
-                  "(see `build_scenes`); triangle ids index `scene.prepared.triangles`.", "", "```"]
+        lines += [
+            "",
+            "## Reproducers: errors of the strategies claimed exact (watertight, auto)",
+            "",
+            "`Scene(mesh).intersect(origin, direction, strategy=..., precision=...)` on the scene's mesh "
+            "(see `build_scenes`); triangle ids index `scene.prepared.triangles`.",
+            "",
+            "```",
+        ]
         seen = set()
         for r, (kind, k, o, d, got, acc) in ex:
             key = (r.scene, r.precision, r.accel, k)
             if key in seen or len(seen) >= 24:
                 continue
             seen.add(key)
-            lines.append(f"{r.scene} | {r.method} | ray {k}: origin={o!r} direction={d!r} "
-                         f"-> got {got}, exact {acc}: {kind}")
+            lines.append(
+                f"{r.scene} | {r.method} | ray {k}: origin={o!r} direction={d!r} -> got {got}, exact {acc}: {kind}"
+            )
         lines += ["```"]
     text = "\n".join(lines) + "\n"
     path.write_text(text)
@@ -911,12 +1055,17 @@ def plot(agg: list[dict[str, Any]], path: Path, header: list[str]) -> None:
 
     pts = [a for a in agg if "accel=none" not in a["method"]]
     use_frog = all(not math.isnan(a["mrays_frog"]) for a in pts)
-    xkey, xlabel = ("mrays_frog", "Mrays/s, frog contour 1024x1024 (1.5M triangles)") if use_frog else \
-        ("mrays_camera", "Mrays/s, median over camera scenes")
+    xkey, xlabel = (
+        ("mrays_frog", "Mrays/s, frog contour 1024x1024 (1.5M triangles)")
+        if use_frog
+        else ("mrays_camera", "Mrays/s, median over camera scenes")
+    )
     pts = [a for a in pts if not math.isnan(a[xkey])]
     fig, axes = plt.subplots(1, 2, figsize=(15, 6.5))
-    panels = [("stress_error", "leak rate + wrong-triangle rate on the stress scenes (+ floor)", FLOOR),
-              ("t_p999", "t relative error, 99.9th percentile over all scenes", 1e-18)]
+    panels = [
+        ("stress_error", "leak rate + wrong-triangle rate on the stress scenes (+ floor)", FLOOR),
+        ("t_p999", "t relative error, 99.9th percentile over all scenes", 1e-18),
+    ]
     for ax, (ykey, ylabel, floor) in zip(axes, panels):
         xs = np.array([a[xkey] for a in pts])
         ys = np.array([max(a[ykey], 0.0) + floor if not math.isnan(a[ykey]) else math.nan for a in pts])
@@ -932,21 +1081,34 @@ def plot(agg: list[dict[str, Any]], path: Path, header: list[str]) -> None:
             zero = a[ykey] == 0
             marker = "s" if peer else ("o" if "float64" in a["method"] else "^")
             color = "tab:red" if peer else "tab:blue"
-            ax.scatter([x], [y], marker=marker, s=60, facecolors="none" if zero else color, edgecolors=color,
-                       zorder=3)
+            ax.scatter([x], [y], marker=marker, s=60, facecolors="none" if zero else color, edgecolors=color, zorder=3)
             label = a["method"].replace("vtkraycast ", "").replace("float", "f")
             shift = 0  # stack labels of points that sit together
             while any(abs(px_ - qx) < 0.12 and abs(py_ - shift * 0.035 - qy) < 0.03 for qx, qy in placed):
                 shift += 1
             placed.append((px_, py_ - shift * 0.035))
-            ax.annotate(label, (x, y), textcoords="offset points", xytext=(6, 3 - 11 * shift), fontsize=7.5,
-                        arrowprops=dict(arrowstyle="-", color="0.6", lw=0.5) if shift else None)
+            ax.annotate(
+                label,
+                (x, y),
+                textcoords="offset points",
+                xytext=(6, 3 - 11 * shift),
+                fontsize=7.5,
+                arrowprops=dict(arrowstyle="-", color="0.6", lw=0.5) if shift else None,
+            )
         if ok.sum():
             front = pareto(xs[ok], ys[ok])
             fx, fy = xs[ok][front], ys[ok][front]
             order = np.argsort(fx)
-            ax.step(fx[order], fy[order], where="pre", color="gray", lw=1.2, ls="--", zorder=2,
-                    label="Pareto front (faster and more accurate is down-right)")
+            ax.step(
+                fx[order],
+                fy[order],
+                where="pre",
+                color="gray",
+                lw=1.2,
+                ls="--",
+                zorder=2,
+                label="Pareto front (faster and more accurate is down-right)",
+            )
         ax.set_yscale("log")
         if ok.sum():
             lo, hi = np.nanmin(ys), np.nanmax(ys)
@@ -969,13 +1131,19 @@ def plot(agg: list[dict[str, Any]], path: Path, header: list[str]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--quick", action="store_true", help="small sizes: a smoke test in under a minute")
-    parser.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "results",
-                        help="output directory (default: benchmarks/results)")
-    parser.add_argument("--repeats", type=int, default=None,
-                        help="timed runs per measurement (default 5; 3 with --quick)")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path(__file__).resolve().parent / "results",
+        help="output directory (default: benchmarks/results)",
+    )
+    parser.add_argument(
+        "--repeats", type=int, default=None, help="timed runs per measurement (default 5; 3 with --quick)"
+    )
     parser.add_argument("--only", default=None, help="run only scenes whose name contains this text")
     args = parser.parse_args(argv)
     if args.repeats is None:

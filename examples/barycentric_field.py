@@ -33,9 +33,7 @@ pv.OFF_SCREEN = True
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory"
-    )
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
@@ -86,16 +84,12 @@ def main(argv: list[str] | None = None) -> None:
         if vtk_hit and hit[k] and int(cell_id) == tid[k]:
             r, s = pcoords[0], pcoords[1]  # x = p0 + r (p1 - p0) + s (p2 - p0)
             np.testing.assert_allclose(bary[k], (1.0 - r - s, r, s), atol=1e-6)
-            np.testing.assert_allclose(
-                bary[k] @ mesh.points[triangles[tid[k]]], x, atol=1e-6 * mesh.length
-            )
+            np.testing.assert_allclose(bary[k] @ mesh.points[triangles[tid[k]]], x, atol=1e-6 * mesh.length)
             compared += 1
     # Pixels whose ray grazes an edge of the silhouette may go either way in VTK's
     # tolerance-based test; all others must agree.
     assert agree >= 0.98 * 400, f"hit/miss agrees with VTK on only {agree} of 400 rays"
-    assert compared >= 0.9 * expected_hits, (
-        f"only {compared} of about {expected_hits:.0f} hit rays compared"
-    )
+    assert compared >= 0.9 * expected_hits, f"only {compared} of about {expected_hits:.0f} hit rays compared"
 
     # -- the picture ------------------------------------------------------------------
     rgb = np.full((nx * ny, 3), 0.12)

@@ -32,9 +32,7 @@ pv.OFF_SCREEN = True
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory"
-    )
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
@@ -62,9 +60,7 @@ def main(argv: list[str] | None = None) -> None:
     # ... each point at its pixel's centre (output row 0 is the bottom, j counts from the top)
     for i, j in [(0, 0), (nx - 1, 0), (0, ny - 1), (17, 40), (nx - 1, ny - 1)]:
         k = i + (ny - 1 - j) * nx
-        np.testing.assert_allclose(
-            image.points[k], cam.eye + to_world @ cam.pixel_center(i, j), atol=1e-12 * size
-        )
+        np.testing.assert_allclose(image.points[k], cam.eye + to_world @ cam.pixel_center(i, j), atol=1e-12 * size)
 
     # -- a few rays through pixel centres, from the eye to their hits ---------------------
     rays = []

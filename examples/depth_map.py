@@ -33,9 +33,7 @@ pv.OFF_SCREEN = True
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory"
-    )
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
@@ -53,9 +51,7 @@ def main(argv: list[str] | None = None) -> None:
     plotter.show(auto_close=False)
     # Keep the clipping range the image was rendered with: the z-buffer is only
     # meaningful with the near/far planes that produced it.
-    vtk_depth = -np.asarray(
-        plotter.get_image_depth(reset_camera_clipping_range=False), dtype=np.float64
-    )
+    vtk_depth = -np.asarray(plotter.get_image_depth(reset_camera_clipping_range=False), dtype=np.float64)
     near, far = plotter.camera.clipping_range
 
     # -- the ray caster's depth through the very same camera ---------------------------
@@ -79,9 +75,7 @@ def main(argv: list[str] | None = None) -> None:
     # camera off by one pixel or a wrong view angle gives relative errors of 1e-3 and more.
     quantum = np.median(depth[both] * (far - near) / (far * near)) * 2.0**-24
     median = float(np.median(relative))
-    assert median < 1e-5, (
-        f"median relative depth difference {median:.2e} (z-buffer step {quantum:.1e})"
-    )
+    assert median < 1e-5, f"median relative depth difference {median:.2e} (z-buffer step {quantum:.1e})"
 
     # -- the figure -----------------------------------------------------------------------
     lo, hi = np.nanmin(depth), np.nanmax(depth)

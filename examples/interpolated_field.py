@@ -37,9 +37,7 @@ pv.OFF_SCREEN = True
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory"
-    )
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
@@ -87,9 +85,7 @@ def main(argv: list[str] | None = None) -> None:
     assert np.isnan(image["Linear"][~hit]).all()
 
     # -- the cast's Wave through the actor's own lookup table ---------------------------
-    colours = lut.MapScalars(
-        numpy_to_vtk(np.ascontiguousarray(image["Wave"]), deep=True), 0, -1, VTK_RGBA
-    )
+    colours = lut.MapScalars(numpy_to_vtk(np.ascontiguousarray(image["Wave"]), deep=True), 0, -1, VTK_RGBA)
     ours = vtk_to_numpy(colours).reshape(ny, nx, 4)[::-1, :, :3].astype(np.int16)  # top-first
     ours_cover = hit.reshape(ny, nx)[::-1]
     background = np.round(np.array(plotter.background_color.float_rgb) * 255).astype(np.int16)

@@ -50,9 +50,7 @@ def vtk_selection(plotter: pv.Plotter, i0: int, i1: int, j0: int, j1: int) -> se
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory"
-    )
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
@@ -79,9 +77,7 @@ def main(argv: list[str] | None = None) -> None:
     i0, i1, j0, j1 = 150, 250, 130, 200
     region = tid[j0:j1, i0:i1]
     picked = np.unique(region[region >= 0])
-    assert np.array_equal(cid[j0:j1, i0:i1], region), (
-        "an all-triangle mesh has CellId == TriangleId"
-    )
+    assert np.array_equal(cid[j0:j1, i0:i1], region), "an all-triangle mesh has CellId == TriangleId"
     assert 20 < picked.size < mesh.n_cells // 2, f"implausible pick of {picked.size} triangles"
 
     # -- every hit under the rectangle projects back into its own pixel -------------------
@@ -108,9 +104,7 @@ def main(argv: list[str] | None = None) -> None:
     # -- the same pixels as individual rays of the seed's model ---------------------------
     to_world = np.column_stack((cam.right, cam.up, cam.backward))
     jg, ig = np.mgrid[j0:j1, i0:i1]
-    directions = np.array(
-        [to_world @ cam.pixel_center(i, j) for i, j in zip(ig.ravel(), jg.ravel())]
-    )
+    directions = np.array([to_world @ cam.pixel_center(i, j) for i, j in zip(ig.ravel(), jg.ravel())])
     hits = scene.intersect(np.broadcast_to(cam.eye, directions.shape), directions)
     assert np.array_equal(hits["triangle_id"].reshape(region.shape), region)
 
@@ -139,9 +133,7 @@ def main(argv: list[str] | None = None) -> None:
     # The pick frustum, from just in front of the hits to behind the whole nut.
     z_lo = 0.9 * float(z.min())
     z_hi = float(-(np.array(mesh.center) - cam.eye) @ cam.backward) + 0.6 * mesh.length
-    box = [through(i, j, z_lo) for i, j in corners_ij] + [
-        through(i, j, z_hi) for i, j in corners_ij
-    ]
+    box = [through(i, j, z_lo) for i, j in corners_ij] + [through(i, j, z_hi) for i, j in corners_ij]
     edges = [(k, (k + 1) % 4) for k in range(4)]  # the near rectangle
     edges += [(4 + k, 4 + (k + 1) % 4) for k in range(4)]  # the far one
     edges += [(k, 4 + k) for k in range(4)]  # and the rays through the corners
@@ -163,8 +155,7 @@ def main(argv: list[str] | None = None) -> None:
     picture.camera_position = [np.array(mesh.center) + 3 * mesh.length * side, mesh.center, cam.up]
     picture.reset_camera(bounds=frustum.bounds)
     picture.add_text(
-        f"{picked.size} picked triangles and the pick frustum\n"
-        "(hidden triangles inside it are not picked)",
+        f"{picked.size} picked triangles and the pick frustum\n(hidden triangles inside it are not picked)",
         font_size=10,
     )
     path = args.out / "picking.png"

@@ -40,9 +40,7 @@ pv.OFF_SCREEN = True
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory"
-    )
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("."), help="output directory")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
@@ -61,9 +59,7 @@ def main(argv: list[str] | None = None) -> None:
 
     # Misses have NaN depth; the calculator's result is the active scalars, with NaN
     # ("invalid values") replaced by a depth behind the nut.
-    far_depth = 1.2 * float(
-        np.linalg.norm(np.subtract(camera.GetPosition(), camera.GetFocalPoint()))
-    )
+    far_depth = 1.2 * float(np.linalg.norm(np.subtract(camera.GetPosition(), camera.GetFocalPoint())))
     fill = vtkArrayCalculator()
     fill.SetAttributeTypeToPointData()
     fill.AddScalarArrayName("Depth")
@@ -83,33 +79,23 @@ def main(argv: list[str] | None = None) -> None:
         result = pipeline.update().output
         frames.append(vtk_to_numpy(result.GetPointData().GetScalars()).reshape(ny, nx)[::-1].copy())
         cast = caster.GetOutput()
-        depths.append(
-            vtk_to_numpy(cast.GetPointData().GetArray("Depth")).reshape(ny, nx)[::-1].copy()
-        )
+        depths.append(vtk_to_numpy(cast.GetPointData().GetArray("Depth")).reshape(ny, nx)[::-1].copy())
         triangles.append(vtk_to_numpy(cast.GetPointData().GetArray("TriangleId")).copy())
 
     # -- one build, a new cast per frame ------------------------------------------------
     assert caster.GetNumberOfSceneBuilds() == 1, f"{caster.GetNumberOfSceneBuilds()} scene builds"
     for k in range(1, n_frames):
         changed = (frames[k] != frames[k - 1]).mean()
-        assert changed > 0.05, (
-            f"frame {k} is too like frame {k - 1} ({100 * changed:.1f} % of pixels changed)"
-        )
+        assert changed > 0.05, f"frame {k} is too like frame {k - 1} ({100 * changed:.1f} % of pixels changed)"
 
     # -- the image filter saw the cast's depth: compare with numpy -------------------------
     filled = np.where(np.isfinite(depths[-1]), depths[-1], far_depth)
     gy, gx = np.gradient(filled)  # central differences inside, one-sided on the border
-    np.testing.assert_allclose(
-        frames[-1][1:-1, 1:-1], np.hypot(gx, gy)[1:-1, 1:-1], rtol=1e-9, atol=1e-9
-    )
+    np.testing.assert_allclose(frames[-1][1:-1, 1:-1], np.hypot(gx, gy)[1:-1, 1:-1], rtol=1e-9, atol=1e-9)
 
     # -- the last frame is what a fresh cast through the moved camera gives -----------------
-    fresh = vrc.cast(
-        reader.GetOutput(), vrc.Camera.from_vtk(camera, nx=nx, ny=ny), arrays=["TriangleId"]
-    )
-    assert np.array_equal(fresh["TriangleId"], triangles[-1]), (
-        "the filter did not follow the camera"
-    )
+    fresh = vrc.cast(reader.GetOutput(), vrc.Camera.from_vtk(camera, nx=nx, ny=ny), arrays=["TriangleId"])
+    assert np.array_equal(fresh["TriangleId"], triangles[-1]), "the filter did not follow the camera"
 
     # -- the montage -------------------------------------------------------------------------
     # Silhouettes (jumps to the background) dwarf the slopes of the faces: clip the scale
