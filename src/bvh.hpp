@@ -30,6 +30,10 @@ struct Scene {
     std::vector<uint32_t> triangles;  ///< (n_triangles, 3) point indices, in leaf order
     std::vector<uint32_t> prim_ids;   ///< leaf-order position -> input triangle index
     std::vector<Node> nodes;          ///< nodes[0] is the root; empty when there are no triangles
+    /// Each leaf's points, once each: node i's are leaf_points[leaf_offsets[i] ..
+    /// leaf_offsets[i + 1]) (none for an inner node). A camera cast frames a leaf from them,
+    /// a third of its triangles' point references.
+    std::vector<uint32_t> leaf_offsets, leaf_points;
     /// Boxes are stored relative to this point (the centre of the triangles' bounding box), so
     /// their single precision resolves the scene's own size, wherever it lies in the world.
     double anchor[3] = {0, 0, 0};
@@ -51,7 +55,8 @@ struct Scene {
     /// working memory kept from camera casts.
     [[nodiscard]] std::size_t memory_bytes() const {
         return points.size() * sizeof(double) + triangles.size() * sizeof(uint32_t) +
-               prim_ids.size() * sizeof(uint32_t) + nodes.size() * sizeof(Node) + scratch->bytes();
+               prim_ids.size() * sizeof(uint32_t) + nodes.size() * sizeof(Node) +
+               (leaf_offsets.size() + leaf_points.size()) * sizeof(uint32_t) + scratch->bytes();
     }
 };
 
@@ -70,6 +75,9 @@ void frame_scene(Scene& scene, const double* points, const uint32_t* triangles, 
 /// and renumbers the triangles: neighbouring triangles (in leaf order, or a mesh's own order)
 /// then read neighbouring points. Unused points are dropped.
 void order_points(Scene& scene, const double* points, std::size_t n_points);
+
+/// Lists each leaf's points (leaf_offsets, leaf_points), once the points are in order.
+void list_leaf_points(Scene& scene);
 
 /// The same scene without a hierarchy (triangles in input order): all a single camera cast
 /// needs, as its triangles are binned to the image's tiles instead (bin_triangles.hpp).

@@ -241,37 +241,14 @@ class ProjectedScene {
     /// none (its projection misses the image, or its depths all lie outside [near, far]),
     /// rect, or unknown (a point has no usable projection: every pixel).
     [[nodiscard]] Reach frame_triangle(const uint32_t tri[3], ImageRect& out) const {
-        const float *a = (*this)[tri[0]], *b = (*this)[tri[1]], *c = (*this)[tri[2]];
 #if defined(__SSE4_1__)
-        const __m128 pa = _mm_load_ps(a), pb = _mm_load_ps(b), pc = _mm_load_ps(c);
+        const __m128 pa = _mm_load_ps((*this)[tri[0]]), pb = _mm_load_ps((*this)[tri[1]]), pc = _mm_load_ps((*this)[tri[2]]);
         const __m128 hi = _mm_max_ps(_mm_max_ps(pa, pb), pc);
         store(rect4(_mm_min_ps(_mm_min_ps(pa, pb), pc), hi, out.near), out);
         if (out.empty()) return Reach::none;
         return _mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) != 0 ? Reach::unknown : Reach::rect;
 #else
-        const float lo_z = std::min(a[2], std::min(b[2], c[2])), hi_z = std::max(a[2], std::max(b[2], c[2]));
-        const auto [near, far] = depth_bounds(lo_z, hi_z);
-        out = kNoPixels;
-        if (near > far_ || far < near_) return Reach::none;
-        out.near = near;
-        const CameraSpec& cam = rays_.spec();
-        const float nx = float(cam.nx), ny = float(cam.ny);
-        if (a[3] + b[3] + c[3] != 0) {
-            out.c0 = out.r0 = 0, out.c1 = uint16_t(nx - 1), out.r1 = uint16_t(ny - 1);
-            return Reach::unknown;
-        }
-        const float lo_c = std::min(a[0], std::min(b[0], c[0])), hi_c = std::max(a[0], std::max(b[0], c[0]));
-        const float lo_r = std::min(a[1], std::min(b[1], c[1])), hi_r = std::max(a[1], std::max(b[1], c[1]));
-        const float c0 = std::min(std::max(std::ceil(lo_c - margin_), 0.0f), nx);
-        const float c1 = std::min(std::max(std::floor(hi_c + margin_), -1.0f), nx - 1);
-        const float r0 = std::min(std::max(std::ceil(lo_r - margin_), 0.0f), ny);
-        const float r1 = std::min(std::max(std::floor(hi_r + margin_), -1.0f), ny - 1);
-        if (c0 > c1 || r0 > r1) {
-            out = kNoPixels;
-            return Reach::none;
-        }
-        out.c0 = uint16_t(c0), out.c1 = uint16_t(c1), out.r0 = uint16_t(r0), out.r1 = uint16_t(r1);
-        return Reach::rect;
+        return frame_points(tri, tri + 3, out);
 #endif
     }
 
@@ -387,15 +364,44 @@ class ProjectedScene {
     }
 #endif
 
+#if !defined(__SSE4_1__)
+    /// As frame_triangle, for the points listed in [p, end) together.
+    Reach frame_points(const uint32_t* p, const uint32_t* end, ImageRect& out) const {
+        float lo[4] = {HUGE_VALF, HUGE_VALF, HUGE_VALF, HUGE_VALF}, hi[4] = {-HUGE_VALF, -HUGE_VALF, -HUGE_VALF, -HUGE_VALF};
+        for (; p != end; ++p)
+            for (int k = 0; k < 4; ++k) lo[k] = std::min(lo[k], (*this)[*p][k]), hi[k] = std::max(hi[k], (*this)[*p][k]);
+        const auto [near, far] = depth_bounds(lo[2], hi[2]);
+        out = kNoPixels;
+        if (near > far_ || far < near_) return Reach::none;
+        out.near = near;
+        const CameraSpec& cam = rays_.spec();
+        const float nx = float(cam.nx), ny = float(cam.ny);
+        if (hi[3] != 0) {
+            out.c0 = out.r0 = 0, out.c1 = uint16_t(nx - 1), out.r1 = uint16_t(ny - 1);
+            return Reach::unknown;
+        }
+        const float c0 = std::min(std::max(std::ceil(lo[0] - margin_), 0.0f), nx);
+        const float c1 = std::min(std::max(std::floor(hi[0] + margin_), -1.0f), nx - 1);
+        const float r0 = std::min(std::max(std::ceil(lo[1] - margin_), 0.0f), ny);
+        const float r1 = std::min(std::max(std::floor(hi[1] + margin_), -1.0f), ny - 1);
+        if (c0 > c1 || r0 > r1) {
+            out = kNoPixels;
+            return Reach::none;
+        }
+        out.c0 = uint16_t(c0), out.c1 = uint16_t(c1), out.r0 = uint16_t(r0), out.r1 = uint16_t(r1);
+        return Reach::rect;
+    }
+#endif
+
     /// Bounds {near, far} on the depths within [lo_z, hi_z] of stored point depths (see rect4).
     [[nodiscard]] std::pair<float, float> depth_bounds(float lo_z, float hi_z) const {
         return {lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_), hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_)};
     }
 
-    /// Leaf i's rectangle: that of all its points, which holds each triangle's at a third
-    /// of the work.
+    /// Leaf i's rectangle: that of its points (each once), which holds each triangle's at
+    /// a fraction of the work.
     void frame_leaf(uint32_t i) {
-        const uint32_t *p = scene_.triangles.data() + 3 * std::size_t(node_[i].index), *end = p + 3 * node_[i].count;
+        const uint32_t *p = scene_.leaf_points.data() + scene_.leaf_offsets[i], *end = scene_.leaf_points.data() + scene_.leaf_offsets[i + 1];
 #if defined(__SSE4_1__)
         __m128 lo = _mm_set1_ps(HUGE_VALF), hi = _mm_set1_ps(-HUGE_VALF);
         for (; p != end; ++p) {
@@ -405,12 +411,7 @@ class ProjectedScene {
         }
         store(rect4(lo, hi, node_[i].rect.near), node_[i].rect);
 #else
-        ImageRect rect = kNoPixels, t;
-        for (; p != end; p += 3) {
-            (void)frame_triangle(p, t);
-            rect.join(t);
-        }
-        node_[i].rect = rect;
+        (void)frame_points(p, end, node_[i].rect);
 #endif
     }
 
