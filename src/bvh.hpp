@@ -31,8 +31,8 @@ struct Scene {
     std::vector<uint32_t> prim_ids;   ///< leaf-order position -> input triangle index
     std::vector<Node> nodes;          ///< nodes[0] is the root; empty when there are no triangles
     /// Each leaf's points, once each: node i's are leaf_points[leaf_offsets[i] ..
-    /// leaf_offsets[i + 1]) (none for an inner node). A camera cast frames a leaf from them,
-    /// a third of its triangles' point references.
+    /// leaf_offsets[i + 1]) (none for an inner node). A camera cast frames a leaf from them:
+    /// under half its triangles' point references (2.0 M of 4.5 M on the frog contour).
     std::vector<uint32_t> leaf_offsets, leaf_points;
     /// Boxes are stored relative to this point (the centre of the triangles' bounding box), so
     /// their single precision resolves the scene's own size, wherever it lies in the world.
