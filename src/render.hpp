@@ -31,6 +31,34 @@ struct Outputs {
     Real* barycentric;     ///< (n, 3) weights of the triangle's points, NaN on a miss
 };
 
+/// Writes closest hits into the outputs: a ray at a time, or a run of misses at once
+/// (most of a sparse frame: filled, not stored pixel by pixel).
+template <class Real>
+class OutputWriter {
+    static constexpr Real kNaN = std::numeric_limits<Real>::quiet_NaN();
+
+   public:
+    OutputWriter(const Scene& scene, const Outputs<Real>& out) : scene_(scene), out_(out) {}
+    /// Ray k's closest hit (or a miss when none is found); `ray` is read on hits only.
+    void operator()(std::size_t k, const Ray& ray, const Hit<Real>& hit) const {
+        const bool found = hit.found();
+        out_.triangle_id[k] = found ? int64_t(scene_.prim_ids[hit.prim]) : -1;
+        if (out_.depth) out_.depth[k] = found ? static_cast<Real>(ray.output(hit.t)) : kNaN;
+        if (out_.barycentric)
+            for (int c = 0; c < 3; ++c) out_.barycentric[3 * k + c] = found ? hit.b[c] : kNaN;
+    }
+    /// Misses for rays k to k + n - 1.
+    void misses(std::size_t k, std::size_t n) const {
+        std::fill_n(out_.triangle_id + k, n, int64_t(-1));
+        if (out_.depth) std::fill_n(out_.depth + k, n, kNaN);
+        if (out_.barycentric) std::fill_n(out_.barycentric + 3 * k, 3 * n, kNaN);
+    }
+
+   private:
+    const Scene& scene_;
+    const Outputs<Real>& out_;
+};
+
 /// Called from the calling thread with (tiles done, tiles total) as the cast starts, then
 /// about every 50 ms; returning false aborts the cast between tiles.
 using Poll = std::function<bool(std::size_t, std::size_t)>;
@@ -114,15 +142,8 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
     std::atomic<bool> abort{false};
     std::mutex mutex;
     std::condition_variable finished;
-    constexpr Real kNaN = std::numeric_limits<Real>::quiet_NaN();
 
-    auto store = [&](std::size_t k, const Ray& ray, const Hit<Real>& hit) {
-        const bool found = hit.found();
-        out.triangle_id[k] = found ? int64_t(scene.prim_ids[hit.prim]) : -1;
-        if (out.depth) out.depth[k] = found ? static_cast<Real>(ray.output(hit.t)) : kNaN;
-        if (out.barycentric)
-            for (int c = 0; c < 3; ++c) out.barycentric[3 * k + c] = found ? hit.b[c] : kNaN;
-    };
+    const OutputWriter<Real> store(scene, out);
     auto tile_done = [&] {
         if (done.fetch_add(1) + 1 == n_tiles) {
             std::lock_guard<std::mutex> lock(mutex);

@@ -62,8 +62,10 @@ class TileTracer {
     /// Per-pixel arrays hold a whole tile (a packet, or a flat scene's block), row by row.
     static constexpr int64_t kStride = CameraRays::kTile, kQuads = kStride / 2;
     static_assert(kStride >= 2 && (kStride & (kStride - 1)) == 0, "test_pixels finds a pixel's quad with masks");
+    static_assert(kStride <= 64, "a row's made rays are the bits of one word");
 
-    /// Traces the tile's rays as one packet and calls store(pixel, ray, hit) for each.
+    /// Traces the tile's rays as one packet and writes each pixel's hit with `store`
+    /// (store(pixel, ray, hit) for a ray made, store.misses(pixel, n) for a run of misses).
     template <class Store>
     void trace(std::size_t tile, Store&& store) {
         const CameraRays::TilePixels t = rays_.tile_pixels(tile);
@@ -117,8 +119,7 @@ class TileTracer {
     template <class Store>
     void misses(const CameraRays::TilePixels& p, Store& store) const {
         const int64_t nx = int64_t(rays_.spec().nx);
-        for (int64_t r = p.r0; r <= p.r1; ++r)
-            for (int64_t i = p.i0; i <= p.i1; ++i) store(std::size_t(i + r * nx), Ray{}, Hit<Real>{});
+        for (int64_t r = p.r0; r <= p.r1; ++r) store.misses(std::size_t(p.i0 + r * nx), std::size_t(p.i1 - p.i0 + 1));
     }
 
     /// The tile's entry point (Reshetov et al. 2005): the deepest node whose subtree holds
@@ -145,14 +146,9 @@ class TileTracer {
         // (an odd width or height leaves a column or row of quads half outside the block:
         // its outside slots hold -inf, so they never keep a node visible)
         for (int64_t r = 0; r < height_ + (height_ & 1); ++r)
-            for (int64_t c = 0; c < width_ + (width_ & 1); ++c) {
-                const int64_t j = c + r * kStride;
-                const bool inside = c < width_ && r < height_;
-                depth_bound_[j] = inside ? HUGE_VAL : -HUGE_VAL;
-                if (!inside) continue;
-                kernel_[j].reset();
-                hit_[j] = Hit<Real>{};
-            }
+            for (int64_t c = 0; c < width_ + (width_ & 1); ++c)
+                depth_bound_[c + r * kStride] = c < width_ && r < height_ ? HUGE_VAL : -HUGE_VAL;
+        std::fill(made_, made_ + kStride, 0);
         for (int64_t r = 0; r < (height_ + 1) / 2; ++r)
             for (int64_t c = 0; c < (width_ + 1) / 2; ++c) quad_[c + r * kQuads] = HUGE_VAL;
     }
@@ -162,13 +158,16 @@ class TileTracer {
         return q.c0 <= p.i1 && q.c1 >= p.i0 && q.r0 <= p.r1 && q.r1 >= p.r0;
     }
 
+    /// Stores the block's rows as misses, then the hits of the rays made.
     template <class Store>
     void finish(Store& store) {
-        for (int64_t r = 0; r < height_; ++r)
-            for (int64_t c = 0; c < width_; ++c) {
-                const int64_t j = c + r * kStride;
-                store(pixel(j), ray_[j], hit_[j]);  // ray_ read on hits only
+        for (int64_t r = 0; r < height_; ++r) {
+            store.misses(pixel(r * kStride), std::size_t(width_));
+            for (uint64_t m = made_[r]; m != 0; m &= m - 1) {
+                const int64_t j = __builtin_ctzll(m) + r * kStride;
+                if (hit_[j].found()) store(pixel(j), ray_[j], hit_[j]);
             }
+        }
     }
 
     /// The image pixel of the block's ray j (column j % kStride, row j / kStride).
@@ -303,7 +302,7 @@ class TileTracer {
                     footprint.emplace(projected_.footprint(i));
                 }
                 if (!footprint->may_cover(i0_ + c, r0_ + r)) continue;
-                if (!kernel_[j]) make_ray(j);
+                if (!(made_[r] >> c & 1)) make_ray(j);
                 const double before = bound_[j];
                 test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
                 if (bound_[j] == before) continue;
@@ -318,15 +317,17 @@ class TileTracer {
     /// (test_pixels repeats these steps inline: calling this from its loop cost 4 % more
     /// instructions per ray, benchmarks/instructions.py.)
     void test_pixel(int64_t j, uint32_t i) {
-        if (!kernel_[j]) make_ray(j);
+        if (!(made_[j / kStride] >> (j % kStride) & 1)) make_ray(j);
         const double before = bound_[j];
         test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
         if (bound_[j] != before) depth_bound_[j] = bound_[j] * scale_[j] * (1 + 1e-12) + projected_.depth_slack();
     }
 
     void make_ray(int64_t j) {
+        made_[j / kStride] |= uint64_t(1) << (j % kStride);
         ray_[j] = rays_.ray(i0_ + j % kStride, r0_ + j / kStride);
         kernel_[j].emplace(ray_[j], context_);
+        hit_[j] = Hit<Real>{};
         bound_[j] = ray_[j].tmax;  // t; depth_bound_ stays unbounded until a hit
         scale_[j] = dot(map_.depth, ray_[j].dir);  // depth per unit of t
     }
@@ -339,6 +340,7 @@ class TileTracer {
     Double4 side_c_, side_floor_, side_a_[3];  // the side planes, one per lane
     Mask4 side_hi_[3];                         // lanes whose plane takes the box's hi corner on axis k
     int64_t i0_ = 0, r0_ = 0, width_ = 0, height_ = 0;  // the block: a tile
+    uint64_t made_[kStride];  // per row of the block, a bit for each pixel whose ray is made
     std::vector<Ray> ray_;
     std::vector<std::optional<Kernel>> kernel_;
     std::vector<Hit<Real>> hit_;
