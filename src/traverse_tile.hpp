@@ -95,7 +95,7 @@ class TileTracer {
                 if (e.far < guess_far_[j]) guess_far_[j] = e.far, guess_[j] = e.triangle;
             }
         for (int64_t j = 0; j < kStride * kStride; ++j)
-            if (guess_far_[j] < HUGE_VALF) test_pixel(j, guess_[j]);
+            if (guess_far_[j] < HUGE_VALF) test_pixel(j % kStride, j / kStride, guess_[j]);
         for (unsigned w = 0; w < bins.workers(); ++w)
             for (const TriangleBins::Entry& e : bins.list(w, tile)) {
                 if (!e.one_pixel()) {
@@ -104,7 +104,7 @@ class TileTracer {
                 }
                 const int64_t j = e.c0 + e.r0 * kStride;
                 if (double(e.near) > depth_bound_[j] || (guess_far_[j] < HUGE_VALF && guess_[j] == e.triangle)) continue;
-                test_pixel(j, e.triangle);
+                test_pixel(e.c0, e.r0, e.triangle);
             }
         if (!unknown.empty()) set_sides(p);
         for (uint32_t i : unknown)
@@ -302,25 +302,23 @@ class TileTracer {
                     footprint.emplace(projected_.footprint(i));
                 }
                 if (!footprint->may_cover(i0_ + c, r0_ + r)) continue;
-                if (!(made_[r] >> c & 1)) make_ray(j);
-                const double before = bound_[j];
-                test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
-                if (bound_[j] == before) continue;
-                depth_bound_[j] = bound_[j] * scale_[j] * (1 + 1e-12) + projected_.depth_slack();  // rounded up
+                if (!test_pixel(c, r, i)) continue;
                 const int64_t q = (j & (kStride - 2)) + (j / (2 * kStride)) * 2 * kStride;  // the quad's first pixel
                 quad_[(c >> 1) + (r >> 1) * kQuads] = std::max(std::max(depth_bound_[q], depth_bound_[q + 1]),
                                                                std::max(depth_bound_[q + kStride], depth_bound_[q + kStride + 1]));
             }
     }
 
-    /// Tests triangle i on the block's ray j (its depth bound then follows any closer hit).
-    /// (test_pixels repeats these steps inline: calling this from its loop cost 4 % more
-    /// instructions per ray, benchmarks/instructions.py.)
-    void test_pixel(int64_t j, uint32_t i) {
-        if (!(made_[j / kStride] >> (j % kStride) & 1)) make_ray(j);
+    /// Tests triangle i on the block's ray at column c, row r; on a closer hit, the ray's
+    /// depth bound follows and this returns true.
+    bool test_pixel(int64_t c, int64_t r, uint32_t i) {
+        const int64_t j = c + r * kStride;
+        if (!(made_[r] >> c & 1)) make_ray(j);
         const double before = bound_[j];
         test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
-        if (bound_[j] != before) depth_bound_[j] = bound_[j] * scale_[j] * (1 + 1e-12) + projected_.depth_slack();
+        if (bound_[j] == before) return false;
+        depth_bound_[j] = bound_[j] * scale_[j] * (1 + 1e-12) + projected_.depth_slack();  // rounded up
+        return true;
     }
 
     void make_ray(int64_t j) {
