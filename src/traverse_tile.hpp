@@ -339,8 +339,8 @@ class TileTracer {
     Mask4 side_hi_[3];                         // lanes whose plane takes the box's hi corner on axis k
     int64_t i0_ = 0, r0_ = 0, width_ = 0, height_ = 0;  // the block: a tile
     uint64_t made_[kStride];  // per row of the block, a bit for each pixel whose ray is made
-    std::vector<Ray> ray_;
-    std::vector<std::optional<Kernel>> kernel_;
+    std::vector<Ray> ray_;                       // ray_, kernel_ and hit_: set for the rays made only
+    std::vector<std::optional<Kernel>> kernel_;  // (optional: kernels have no default state)
     std::vector<Hit<Real>> hit_;
     std::vector<double> bound_, scale_, depth_bound_;  // t of the hit, depth per unit t, depth of the hit rounded up
     std::vector<float> guess_far_;  // a flat scene's likely hit per pixel: its farthest point depth
