@@ -342,6 +342,13 @@ class Row:
     t_errors: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     examples: list = field(default_factory=list, repr=False)
 
+    def record_times(self, times: list[float]) -> None:
+        """The timing columns, from the times of casting ``n_rays_timed`` rays."""
+        self.repeats = len(times)
+        self.time_median_s = float(np.median(times))
+        self.time_min_s = float(np.min(times))
+        self.mrays_s = self.n_rays_timed / self.time_median_s / 1e6
+
 
 CSV_FIELDS = [f for f in Row.__dataclass_fields__ if f not in ("t_errors", "examples")]
 
@@ -797,10 +804,7 @@ def run_scene(spec: SceneSpec, peers: list[Peer], args: argparse.Namespace, rng:
                         all_ids[sample], h["t"].astype(np.float64)[sample], h["barycentric"].astype(np.float64)[sample]
                     )
                     h = None
-                row.repeats = len(times)
-                row.time_median_s = float(np.median(times))
-                row.time_min_s = float(np.min(times))
-                row.mrays_s = row.n_rays_timed / row.time_median_s / 1e6
+                row.record_times(times)
                 score(
                     row,
                     ref,
@@ -833,13 +837,8 @@ def run_scene(spec: SceneSpec, peers: list[Peer], args: argparse.Namespace, rng:
             row.note = f"failed: {exc!r}"
             rows.append(row)
             continue
-        finally:
-            pass
         row.n_rays_timed = n
-        row.repeats = len(times)
-        row.time_median_s = float(np.median(times))
-        row.time_min_s = float(np.min(times))
-        row.mrays_s = n / row.time_median_s / 1e6
+        row.record_times(times)
         row.hit_fraction = float((res_all.ids >= 0).mean())
         res = Result(res_all.ids[sample], res_all.t[sample], res_all.bary[sample])
         score(
