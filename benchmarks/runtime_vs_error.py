@@ -750,6 +750,11 @@ def run_scene(spec: SceneSpec, peers: list[Peer], args: argparse.Namespace, rng:
     small = m < args.brute_force_below
     arrays = ["TriangleId", "Depth", "Barycentric"]
 
+    def score_row(row: Row, res: Result, all_ids: np.ndarray, precision: Any) -> None:
+        """Scores a method's row against this scene's exact reference, with ties to 32 eps."""
+        tie = 32 * float(np.finfo(precision).eps)
+        score(row, ref, sample, res, spec.must_hit, origins, dirs, all_ids, geometry, tie)
+
     for accel in ("bvh", "none"):
         if accel == "none" and not small:
             continue
@@ -805,18 +810,7 @@ def run_scene(spec: SceneSpec, peers: list[Peer], args: argparse.Namespace, rng:
                     )
                     h = None
                 row.record_times(times)
-                score(
-                    row,
-                    ref,
-                    sample,
-                    res,
-                    spec.must_hit,
-                    origins,
-                    dirs,
-                    all_ids,
-                    geometry,
-                    32 * float(np.finfo(precision).eps),
-                )
+                score_row(row, res, all_ids, precision)
                 row.note = "; ".join(x for x in (scene_note, row.note) if x)
                 img = None
                 rows.append(row)
@@ -841,18 +835,7 @@ def run_scene(spec: SceneSpec, peers: list[Peer], args: argparse.Namespace, rng:
         row.record_times(times)
         row.hit_fraction = float((res_all.ids >= 0).mean())
         res = Result(res_all.ids[sample], res_all.t[sample], res_all.bary[sample])
-        score(
-            row,
-            ref,
-            sample,
-            res,
-            spec.must_hit,
-            origins,
-            dirs,
-            res_all.ids,
-            geometry,
-            32 * float(np.finfo(peer.precision).eps),
-        )
+        score_row(row, res, res_all.ids, peer.precision)
         row.note = "; ".join(x for x in (scene_note, row.note) if x)
         rows.append(row)
         log_row(row)
