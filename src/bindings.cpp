@@ -205,6 +205,7 @@ NB_MODULE(_core, m) {
         .def_prop_ro("has_bvh", &vrc::Scene::has_bvh)
         .def_prop_ro("n_triangles", &vrc::Scene::n_triangles)
         .def_prop_ro("n_nodes", [](const vrc::Scene& s) { return s.nodes.size(); })
+        .def_prop_ro("n_camera_nodes", [](const vrc::Scene& s) { return s.camera.nodes.size(); })
         .def_prop_ro("memory_bytes", &vrc::Scene::memory_bytes,
                      "Bytes held by the BVH, the triangles, the points and the memory kept for camera casts.");
     m.attr("max_binned_pixels") = vrc::ImageRect::kMaxPixels;  // widest image a scene without a BVH casts

@@ -23,6 +23,29 @@ struct Node {
 };
 static_assert(sizeof(Node) == 32, "nodes are meant to be 32 bytes");
 
+/// The BVH as a camera cast's tiles go through it (traverse_tile.hpp): every subtree of at
+/// most kMaxLeaf triangles is one leaf. A tile culls a triangle with a few integer compares
+/// on its image rectangle, so a node visit (a dependent load, mostly a cache miss) costs
+/// it more than a triangle, where a single ray's triangle test is a whole kernel. On the
+/// frog contour (benchmarks/compare_builds.py, 2 threads): the SAH building leaves of up to
+/// 31 triangles gave camera casts at 1024x1024 0.89x the time, but rays cast one by one
+/// (128x128) 1.26x; this tree gives the first (0.88x) and leaves the second alone. A
+/// quarter of the BVH's nodes, so a quarter of the per-camera framing.
+struct CameraTree {
+    static constexpr uint32_t kMaxLeaf = 31;
+    /// As Node's links: the first child (the second follows it), or the first triangle and
+    /// the count of a leaf (0 for an inner node). Laid out as the BVH is (sibling pairs,
+    /// depth first).
+    struct Link {
+        uint32_t index, count;
+    };
+    std::vector<Link> nodes;
+    /// Each leaf's points, once each: node i's are leaf_points[leaf_offsets[i] ..
+    /// leaf_offsets[i + 1]) (none for an inner node). A camera cast frames a leaf from them:
+    /// 1.3 M of the triangles' 4.5 M point references on the frog contour.
+    std::vector<uint32_t> leaf_offsets, leaf_points;
+};
+
 /// Triangles, in BVH leaf order, and the hierarchy over them. Owns copies of its input so
 /// that a mesh modified after (or during) a cast cannot change a result.
 struct Scene {
@@ -30,10 +53,7 @@ struct Scene {
     std::vector<uint32_t> triangles;  ///< (n_triangles, 3) point indices, in leaf order
     std::vector<uint32_t> prim_ids;   ///< leaf-order position -> input triangle index
     std::vector<Node> nodes;          ///< nodes[0] is the root; empty when there are no triangles
-    /// Each leaf's points, once each: node i's are leaf_points[leaf_offsets[i] ..
-    /// leaf_offsets[i + 1]) (none for an inner node). A camera cast frames a leaf from them:
-    /// under half its triangles' point references (2.0 M of 4.5 M on the frog contour).
-    std::vector<uint32_t> leaf_offsets, leaf_points;
+    CameraTree camera;                ///< the hierarchy as camera casts go through it
     /// Boxes are stored relative to this point (the centre of the triangles' bounding box), so
     /// their single precision resolves the scene's own size, wherever it lies in the world.
     double anchor[3] = {0, 0, 0};
@@ -56,7 +76,8 @@ struct Scene {
     [[nodiscard]] std::size_t memory_bytes() const {
         return points.size() * sizeof(double) + triangles.size() * sizeof(uint32_t) +
                prim_ids.size() * sizeof(uint32_t) + nodes.size() * sizeof(Node) +
-               (leaf_offsets.size() + leaf_points.size()) * sizeof(uint32_t) + scratch->bytes();
+               camera.nodes.size() * sizeof(CameraTree::Link) +
+               (camera.leaf_offsets.size() + camera.leaf_points.size()) * sizeof(uint32_t) + scratch->bytes();
     }
 };
 
@@ -76,8 +97,8 @@ void frame_scene(Scene& scene, const double* points, const uint32_t* triangles, 
 /// then read neighbouring points. Unused points are dropped.
 void order_points(Scene& scene, const double* points, std::size_t n_points);
 
-/// Lists each leaf's points (leaf_offsets, leaf_points), once the points are in order.
-void list_leaf_points(Scene& scene);
+/// Sets the scene's camera tree from its BVH, once the points are in order.
+void build_camera_tree(Scene& scene);
 
 /// The same scene without a hierarchy (triangles in input order): all a single camera cast
 /// needs, as its triangles are binned to the image's tiles instead (bin_triangles.hpp).

@@ -882,7 +882,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         }
     });
     order_points(scene, points, n_points);
-    list_leaf_points(scene);
+    build_camera_tree(scene);
     return scene;
 }
 
@@ -1060,7 +1060,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
         for (int c = 0; c < 3; ++c) scene.triangles[3 * i + c] = triangles[3 * std::size_t(id) + c];
     }
     order_points(scene, points, n_points);
-    list_leaf_points(scene);
+    build_camera_tree(scene);
     return scene;
 }
 

@@ -1,6 +1,6 @@
 // A scene seen from one camera, prepared once per cast by all render workers: every point
 // projected into the image, from the points each triangle's pixel rectangle and nearest
-// depth, and through a BVH each node's rectangle (holding its triangles').
+// depth, and through a BVH each camera-tree node's rectangle (holding its triangles').
 // The tile tracer culls nodes and triangles against a packet with a few integer compares
 // instead of plane tests, and a node's rectangle is tighter than its box's projection.
 #pragma once
@@ -125,15 +125,16 @@ class Footprint {
     bool known_;
 };
 
-/// A BVH node as a camera cast traverses it: its image rectangle beside its links (as in
-/// Node), 16 bytes, so a node's children are tested and entered from one cache line
-/// without touching the BVH's own boxes.
+/// A camera-tree node (bvh.hpp) as a cast traverses it: its image rectangle beside its
+/// links (as in Node), 16 bytes, so a node's children are tested and entered from one
+/// cache line without touching the BVH's own boxes.
 struct ProjectedNode {
-    static constexpr std::size_t kMaxNodes = std::size_t(1) << 28;  // for the 28-bit index
+    static constexpr std::size_t kMaxIndex = std::size_t(1) << 27;  // for the 27-bit index
     ImageRect rect;
-    uint32_t index : 28;  ///< first child, or first triangle
-    uint32_t count : 4;   ///< triangles of a leaf (at most 8), 0 for an inner node
+    uint32_t index : 27;  ///< first child, or first triangle
+    uint32_t count : 5;   ///< triangles of a leaf (at most CameraTree::kMaxLeaf), 0 for an inner node
 };
+static_assert(CameraTree::kMaxLeaf < 32, "a leaf's count is 5 bits");
 static_assert(sizeof(ProjectedNode) == 16, "projected nodes are meant to be 16 bytes");
 
 /// Each point's pixel column, row and depth for one camera, computed once per cast (the
@@ -147,12 +148,12 @@ class ProjectedScene {
    public:
     ProjectedScene(const Scene& scene, const CameraRays& rays)
         : scene_(scene), rays_(rays), map_(rays.pixel_map()) {
-        const std::size_t n_points = scene.points.size() / 3, n_nodes = scene.has_bvh() ? scene.nodes.size() : 0;
+        const std::size_t n_points = scene.points.size() / 3, n_nodes = scene.has_bvh() ? scene.camera.nodes.size() : 0;
         memory_ = scene.scratch->take(n_points * 4 * sizeof(float) + n_nodes * sizeof(ProjectedNode));
         points_ = new (memory_.data.get()) float[4 * n_points];  // trivial types: no initialisation
         node_ = new (memory_.data.get() + n_points * 4 * sizeof(float)) ProjectedNode[n_nodes];
-        if (!memory_.used)  // the links (as the BVH's) stay from one cast to the next
-            for (std::size_t i = 0; i < n_nodes; ++i) node_[i].index = scene.nodes[i].index, node_[i].count = scene.nodes[i].count;
+        if (!memory_.used)  // the links (the camera tree's) stay from one cast to the next
+            for (std::size_t i = 0; i < n_nodes; ++i) node_[i].index = scene.camera.nodes[i].index, node_[i].count = scene.camera.nodes[i].count;
         memory_.used = true;
         if (n_nodes > 0) plan_subtrees();
         const CameraSpec& c = rays.spec();
@@ -401,7 +402,8 @@ class ProjectedScene {
     /// Leaf i's rectangle: that of its points (each once), which holds each triangle's at
     /// a fraction of the work.
     void frame_leaf(uint32_t i) {
-        const uint32_t *p = scene_.leaf_points.data() + scene_.leaf_offsets[i], *end = scene_.leaf_points.data() + scene_.leaf_offsets[i + 1];
+        const CameraTree& tree = scene_.camera;
+        const uint32_t *p = tree.leaf_points.data() + tree.leaf_offsets[i], *end = tree.leaf_points.data() + tree.leaf_offsets[i + 1];
 #if defined(__SSE4_1__)
         __m128 lo = _mm_set1_ps(HUGE_VALF), hi = _mm_set1_ps(-HUGE_VALF);
         for (; p != end; ++p) {
@@ -437,18 +439,19 @@ class ProjectedScene {
     /// there are enough to share among workers, or it is a leaf. The nodes split off are
     /// `top_`, parents before children. Relies on the builder's layout (sibling pairs,
     /// depth first): an inner node's descendants are one block, from its children to the
-    /// last pair of its rightmost inner descendant.
+    /// last pair of its rightmost inner descendant. (The camera tree keeps that layout.)
     void plan_subtrees() {
         const auto subtree = [this](uint32_t root) {
-            const std::vector<Node>& nodes = scene_.nodes;
-            if (nodes[root].is_leaf()) return Subtree{root, root, root};
+            const std::vector<CameraTree::Link>& nodes = scene_.camera.nodes;
+            const auto is_leaf = [&](uint32_t i) { return nodes[i].count != 0; };
+            if (is_leaf(root)) return Subtree{root, root, root};
             // the block ends with the children of the last inner node on the way down that
             // takes the right child when it is inner, else the left one
             uint32_t i = root, last;
             do {
                 last = nodes[i].index;
-                i = nodes[last + 1].is_leaf() ? last : last + 1;
-            } while (!nodes[i].is_leaf());
+                i = is_leaf(last + 1) ? last : last + 1;
+            } while (!is_leaf(i));
             return Subtree{root, nodes[root].index, last + 2};
         };
         const auto size = [](const Subtree& t) { return t.end - t.first; };
@@ -456,7 +459,7 @@ class ProjectedScene {
         subtrees_ = {subtree(0)};
         while (subtrees_.size() < kSubtrees && size(subtrees_.front()) > 0) {
             std::pop_heap(subtrees_.begin(), subtrees_.end(), smaller);
-            const uint32_t root = subtrees_.back().root, left = scene_.nodes[root].index;
+            const uint32_t root = subtrees_.back().root, left = scene_.camera.nodes[root].index;
             top_.push_back(root);
             subtrees_.back() = subtree(left);
             std::push_heap(subtrees_.begin(), subtrees_.end(), smaller);

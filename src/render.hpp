@@ -92,8 +92,11 @@ struct CameraCast {
     /// Whether camera rays of this size go through tiles: the image rectangles hold 16-bit
     /// pixel indices. (Larger images through a BVH are traced ray by ray.)
     static bool fits(const CameraSpec& c) { return c.nx <= ImageRect::kMaxPixels && c.ny <= ImageRect::kMaxPixels; }
-    /// Whether the BVH's nodes fit the projected nodes' 28-bit links (else ray by ray).
-    static bool fits(const Scene& scene) { return scene.nodes.size() < ProjectedNode::kMaxNodes; }
+    /// Whether the camera tree's links (nodes and triangles) fit the projected nodes' 27
+    /// bits (else ray by ray).
+    static bool fits(const Scene& scene) {
+        return scene.camera.nodes.size() < ProjectedNode::kMaxIndex && scene.n_triangles() < ProjectedNode::kMaxIndex;
+    }
     /// Whether the preparation (every point and node, once per camera) pays off through a
     /// BVH: not when few pixels may see a large scene, which then go ray by ray. What a
     /// pixel is worth in prepared elements, from alternated runs (2 threads, noisy): the
@@ -106,7 +109,7 @@ struct CameraCast {
         // (a frame nothing can see stays: the camera path prepares nothing for it and
         // writes its misses without making rays)
         const std::size_t pixels = rays.pixels_may_hit();
-        return !scene.has_bvh() || pixels == 0 || kElementsPerPixel * pixels >= scene.points.size() / 3 + scene.nodes.size();
+        return !scene.has_bvh() || pixels == 0 || kElementsPerPixel * pixels >= scene.points.size() / 3 + scene.camera.nodes.size();
     }
     /// Worker w's share of the preparation; returns the triangles every tile tests. None
     /// when no pixel may see the scene: every tile is then a miss.

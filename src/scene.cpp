@@ -48,22 +48,6 @@ void order_points(Scene& scene, const double* points, std::size_t n_points) {
             for (int k = 0; k < 3; ++k) scene.points[3 * std::size_t(index[p]) + k] = points[3 * p + k];
 }
 
-void list_leaf_points(Scene& scene) {
-    std::vector<uint32_t>& list = scene.leaf_points;
-    std::vector<uint32_t> listed_by(scene.points.size() / 3, UINT32_MAX);  // the last leaf to list each point
-    scene.leaf_offsets.resize(scene.nodes.size() + 1);
-    list.clear();
-    reserve_huge(list, scene.points.size() / 3 * 3);  // (a point serves 2.6 leaves on the frog contour)
-    for (uint32_t i = 0; i < scene.nodes.size(); ++i) {
-        scene.leaf_offsets[i] = uint32_t(list.size());
-        const Node& node = scene.nodes[i];
-        for (const uint32_t *p = scene.triangles.data() + 3 * std::size_t(node.index), *end = p + 3 * node.count; p != end; ++p)
-            if (listed_by[*p] != i) listed_by[*p] = i, list.push_back(*p);
-    }
-    scene.leaf_offsets.back() = uint32_t(list.size());
-    list.shrink_to_fit();
-}
-
 Scene flat_scene(const double* points, std::size_t n_points, const uint32_t* triangles, std::size_t n_triangles) {
     Scene scene;
     scene.triangles.assign(triangles, triangles + 3 * n_triangles);

@@ -69,7 +69,7 @@ class TileTracer {
     template <class Store>
     void trace(std::size_t tile, Store&& store) {
         const CameraRays::TilePixels t = rays_.tile_pixels(tile);
-        const uint32_t entry = rays_.tile_may_hit(tile) && !scene_.nodes.empty() ? entry_node(t) : kNoNode;
+        const uint32_t entry = rays_.tile_may_hit(tile) && !scene_.camera.nodes.empty() ? entry_node(t) : kNoNode;
         if (entry == kNoNode) return misses(t, store);  // no node's rectangle meets the tile
         start(t);
         traverse(t, entry);

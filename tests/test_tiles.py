@@ -212,14 +212,14 @@ def test_unused_points_are_dropped():
 
 
 def test_casts_keep_their_working_memory():
-    """A camera cast's projected points and nodes (16 bytes each) stay with the scene for
-    the next cast rather than being allocated afresh."""
+    """A camera cast's projected points and camera-tree nodes (16 bytes each) stay with the
+    scene for the next cast rather than being allocated afresh."""
     mesh = bumpy_sphere(3)
     scene = vrc.Scene(mesh)
     before = scene.memory_bytes
     scene.cast(around(mesh))
     after = scene.memory_bytes
-    assert after - before == 16 * (mesh.n_points + scene._core.n_nodes)
+    assert after - before == 16 * (mesh.n_points + scene._core.n_camera_nodes)
     scene.cast(around(mesh, view="xy", nx=120, ny=90))
     assert scene.memory_bytes == after
 
@@ -250,22 +250,22 @@ def test_concurrent_casts_on_one_scene():
     for k, image in enumerate(together):
         np.testing.assert_array_equal(image["TriangleId"], alone[k % len(cams)]["TriangleId"])
         np.testing.assert_array_equal(image["Depth"], alone[k % len(cams)]["Depth"])
-    kept = 16 * (mesh.n_points + scene._core.n_nodes)
+    kept = 16 * (mesh.n_points + scene._core.n_camera_nodes)
     assert scene.memory_bytes - vrc.Scene(mesh).memory_bytes in range(kept, 4 * kept + 1, kept)
 
 
 @pytest.mark.parametrize("build_threads", [1, 2])
 def test_node_rectangles_framed_by_many_workers(build_threads):
-    """Workers frame the node rectangles a subtree at a time (the builder's layout puts each
-    subtree in one block): any node framed before its children, or left unframed, would
-    cull pixels. Two builders (one thread, or subtrees built apart and then laid out), a
+    """Workers frame the node rectangles a subtree at a time (the camera tree keeps the
+    builder's layout, each subtree in one block): any node framed before its children, or
+    left unframed, would cull pixels. Two builders (one thread, or subtrees built apart and then laid out), a
     root that is a leaf, and more workers than subtrees to go round."""
     mesh = bumpy_sphere(5)
     scene = vrc.Scene(mesh, threads=build_threads)
-    assert scene._core.n_nodes > 1000  # many subtrees
+    assert scene._core.n_camera_nodes > 1000  # many subtrees
     for threads in (1, 2, 5):
         assert assert_same_as_ray_by_ray(scene, around(mesh, nx=160, ny=120), threads=threads) > 3000
     two = pv.Plane(i_resolution=1, j_resolution=1).triangulate()
-    assert vrc.Scene(two)._core.n_nodes == 1
+    assert vrc.Scene(two)._core.n_camera_nodes == 1
     for threads in (1, 3):
         assert compare(vrc.Scene(two), vrc.Scene(two), around(two), threads=threads) > 0
