@@ -97,13 +97,16 @@ struct CameraCast {
     static bool fits(const Scene& scene) {
         return scene.camera.nodes.size() < ProjectedNode::kMaxIndex && scene.n_triangles() < ProjectedNode::kMaxIndex;
     }
-    /// Whether the preparation (every point and node, once per camera) pays off through a
-    /// BVH: not when few pixels may see a large scene, which then go ray by ray. What a
-    /// pixel is worth in prepared elements, from alternated runs (2 threads, noisy): the
-    /// frog contour (1.3 M points and nodes, in a view that frames it) is 1.8x to 3x
-    /// faster ray by ray at 128x128, about even at 256x256 and 384x384, 1.6x slower at
-    /// 512x512; a bumpy sphere of 330 k triangles filling the frame is even at 64x64 and
-    /// 2x slower ray by ray at 128x128.
+    /// Whether the preparation (every point and camera-tree node, once per camera) pays off
+    /// through a BVH: not when few pixels may see a large scene, which then go ray by ray.
+    /// What a pixel is worth in prepared elements, from alternated runs (compare_builds.py
+    /// with the choice forced, 2 threads, noisy): the frog contour (0.9 M points and nodes,
+    /// in a view that frames it, covering an eighth of it) is 1.47x faster ray by ray at
+    /// 128x128, 1.09x at 192x192, even at 224x224, and 1.19x slower at 256x256; a bumpy
+    /// sphere of 330 k triangles (0.2 M) filling the frame is 1.11x slower ray by ray at
+    /// 64x64 and 1.8x at 128x128. A pixel that may see the scene (a bound on those that
+    /// do) is worth more when more do: 32 lies between the two, each about 10 % off near
+    /// its crossover.
     static constexpr std::size_t kElementsPerPixel = 32;
     static bool pays(const Scene& scene, const CameraRays& rays) {
         // (a frame nothing can see stays: the camera path prepares nothing for it and
