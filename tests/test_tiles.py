@@ -258,8 +258,8 @@ def test_concurrent_casts_on_one_scene():
 def test_node_rectangles_framed_by_many_workers(build_threads):
     """Workers frame the node rectangles a subtree at a time (the camera tree keeps the
     builder's layout, each subtree in one block): any node framed before its children, or
-    left unframed, would cull pixels. Two builders (one thread, or subtrees built apart and then laid out), a
-    root that is a leaf, and more workers than subtrees to go round."""
+    left unframed, would cull pixels. Two builders (one thread, or subtrees built apart and
+    then laid out), a root that is a leaf, and more workers than subtrees to go round."""
     mesh = bumpy_sphere(5)
     scene = vrc.Scene(mesh, threads=build_threads)
     assert scene._core.n_camera_nodes > 1000  # many subtrees
@@ -269,3 +269,17 @@ def test_node_rectangles_framed_by_many_workers(build_threads):
     assert vrc.Scene(two)._core.n_camera_nodes == 1
     for threads in (1, 3):
         assert compare(vrc.Scene(two), vrc.Scene(two), around(two), threads=threads) > 0
+
+
+def test_camera_tree_leaves_hold_up_to_31_triangles():
+    """Camera casts go through the BVH with every subtree of at most 31 triangles collapsed
+    into one leaf (the BVH's own leaves hold at most 8): 31 triangles make one leaf, 32 a
+    root over two; casts through either equal the rays cast one by one through the BVH."""
+    grid = pv.Plane(i_resolution=4, j_resolution=4).triangulate()
+    assert grid.n_cells == 32
+    for n, camera_nodes in ((31, 1), (32, 3)):
+        mesh = pv.PolyData(grid.points, grid.faces[: 4 * n])
+        scene = vrc.Scene(mesh)
+        assert scene._core.n_nodes > camera_nodes
+        assert scene._core.n_camera_nodes == camera_nodes
+        assert compare(scene, scene, around(mesh, view="xy", nx=64, ny=64)) > 1000
