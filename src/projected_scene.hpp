@@ -287,7 +287,7 @@ class ProjectedScene {
     /// empty). The same operations on the same floats as rect4, so the same rectangles;
     /// a leaf's triangles cost a few dozen vector operations per eight instead of a dozen
     /// scalar ones each. The points are loaded whole and transposed, not gathered: AVX2's
-    /// gathers took 1.12x the time (benchmarks/compare_builds.py, frog at 1024x1024, on
+    /// gathers took 1.11x the time (benchmarks/compare_builds.py, frog at 1024x1024, on
     /// this AMD EPYC, where a gather is a long microcoded sequence).
     [[nodiscard]] Rects8 triangles8(uint32_t first, uint32_t n) const {
         const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), live = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(n)), lane);
