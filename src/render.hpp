@@ -47,6 +47,11 @@ class OutputWriter {
         if (out_.barycentric)
             for (int c = 0; c < 3; ++c) out_.barycentric[3 * k + c] = found ? hit.b[c] : kNaN;
     }
+    /// Asks the cache for what storing `hit` reads (its input triangle index: scattered,
+    /// mostly a miss).
+    void prefetch(const Hit<Real>& hit) const {
+        if (hit.found()) __builtin_prefetch(scene_.prim_ids.data() + hit.prim);
+    }
     /// Misses for rays k to k + n - 1.
     void misses(std::size_t k, std::size_t n) const {
         std::fill_n(out_.triangle_id + k, n, int64_t(-1));

@@ -65,7 +65,8 @@ class TileTracer {
     static_assert(kStride <= 64, "a row's made rays are the bits of one word");
 
     /// Traces the tile's rays as one packet and writes each pixel's hit with `store`
-    /// (store(pixel, ray, hit) for a ray made, store.misses(pixel, n) for a run of misses).
+    /// (store(pixel, ray, hit) for a ray made, store.misses(pixel, n) for a run of misses;
+    /// store.prefetch(hit) first, for all the hits of the tile).
     template <class Store>
     void trace(std::size_t tile, Store&& store) {
         const CameraRays::TilePixels t = rays_.tile_pixels(tile);
@@ -161,6 +162,8 @@ class TileTracer {
     /// Stores the block's rows as misses, then the hits of the rays made.
     template <class Store>
     void finish(Store& store) {
+        for (int64_t r = 0; r < height_; ++r)
+            for (uint64_t m = made_[r]; m != 0; m &= m - 1) store.prefetch(hit_[__builtin_ctzll(m) + r * kStride]);
         for (int64_t r = 0; r < height_; ++r) {
             store.misses(pixel(r * kStride), std::size_t(width_));
             for (uint64_t m = made_[r]; m != 0; m &= m - 1) {
