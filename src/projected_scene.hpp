@@ -341,9 +341,10 @@ class ProjectedScene {
         r.near = _mm256_blendv_ps(r.near, _mm256_set1_ps(HUGE_VALF), empty);
         return r;
     }
-    /// Which lanes of `q` may be hit by the ray of their pixel (column `col`, row `row`):
-    /// Footprint's test, the same operations on the same floats, eight triangles at once.
-    [[nodiscard]] __m256 may_cover8(const Rects8& q, __m256 col, __m256 row) const {
+    /// Which lanes of `q` may be hit by the ray of their pixel at (col0, row0), and which
+    /// by that of their pixel at (col1, row1): Footprint's test, the same operations on the
+    /// same floats, eight triangles at once.
+    [[nodiscard]] std::pair<__m256, __m256> may_cover8(const Rects8& q, __m256 col0, __m256 row0, __m256 col1, __m256 row1) const {
         const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(INT32_MAX));
         const auto abs = [&](__m256 v) { return _mm256_and_ps(v, abs_mask); };
         __m256 size = _mm256_setzero_ps();
@@ -353,15 +354,21 @@ class ProjectedScene {
             _mm256_mul_ps(_mm256_set1_ps(1.01f), margin),
             _mm256_mul_ps(_mm256_set1_ps(0x1p-20f),
                           _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(3), size), margin), _mm256_set1_ps(2))));
-        __m256 below = _mm256_setzero_ps(), above = _mm256_setzero_ps();
+        __m256 below[2] = {}, above[2] = {};
         for (int k = 0; k < 3; ++k) {
             const __m256 ex = _mm256_sub_ps(q.x[(k + 1) % 3], q.x[k]), ey = _mm256_sub_ps(q.y[(k + 1) % 3], q.y[k]);
             const __m256 slack = _mm256_add_ps(_mm256_mul_ps(m, _mm256_add_ps(abs(ex), abs(ey))), _mm256_set1_ps(0x1p-120f));
-            const __m256 e = _mm256_sub_ps(_mm256_mul_ps(ex, _mm256_sub_ps(row, q.y[k])), _mm256_mul_ps(ey, _mm256_sub_ps(col, q.x[k])));
-            below = _mm256_or_ps(below, _mm256_cmp_ps(e, _mm256_xor_ps(slack, _mm256_set1_ps(-0.0f)), _CMP_LT_OQ));
-            above = _mm256_or_ps(above, _mm256_cmp_ps(e, slack, _CMP_GT_OQ));
+            const __m256 minus_slack = _mm256_xor_ps(slack, _mm256_set1_ps(-0.0f));
+            const __m256 col[2] = {col0, col1}, row[2] = {row0, row1};
+            for (int p = 0; p < 2; ++p) {
+                const __m256 e = _mm256_sub_ps(_mm256_mul_ps(ex, _mm256_sub_ps(row[p], q.y[k])), _mm256_mul_ps(ey, _mm256_sub_ps(col[p], q.x[k])));
+                below[p] = _mm256_or_ps(below[p], _mm256_cmp_ps(e, minus_slack, _CMP_LT_OQ));
+                above[p] = _mm256_or_ps(above[p], _mm256_cmp_ps(e, slack, _CMP_GT_OQ));
+            }
         }
-        return _mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below, above), _mm256_castsi256_ps(_mm256_set1_epi32(-1))));
+        const __m256 all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+        return {_mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[0], above[0]), all)),
+                _mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[1], above[1]), all))};
     }
 #endif
 

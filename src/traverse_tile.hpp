@@ -287,8 +287,9 @@ class TileTracer {
     /// their rectangles cover.
     void test_leaf(const CameraRays::TilePixels& packet, uint32_t first, uint32_t count) {
 #if defined(__AVX2__)
-        // Eight triangles at a time: their rectangles, then those on one pixel of the
-        // packet (two thirds of the frog's) through Footprint's test there, all at once.
+        // Eight triangles at a time: their rectangles, then those on one or two pixels of
+        // the packet (two thirds of the frog's on one) through Footprint's test there, all
+        // at once; the others go pixel by pixel through test_pixels.
         const __m256 i0 = _mm256_set1_ps(float(packet.i0)), i1 = _mm256_set1_ps(float(packet.i1)),
                      r0 = _mm256_set1_ps(float(packet.r0)), r1 = _mm256_set1_ps(float(packet.r1));
         for (uint32_t i = first, end = first + count; i < end; i += 8) {
@@ -300,9 +301,13 @@ class TileTracer {
             // the part within the packet
             const __m256 c0 = _mm256_max_ps(q.c0, i0), c1 = _mm256_min_ps(q.c1, i1), rr0 = _mm256_max_ps(q.r0, r0),
                          rr1 = _mm256_min_ps(q.r1, r1);
-            const __m256 one = _mm256_and_ps(_mm256_cmp_ps(c0, c1, _CMP_EQ_OQ), _mm256_cmp_ps(rr0, rr1, _CMP_EQ_OQ));
-            const unsigned single = unsigned(_mm256_movemask_ps(one));
-            lanes &= ~single | unsigned(_mm256_movemask_ps(projected_.may_cover8(q, c0, rr0)));
+            // on one pixel, or two (side by side or one above the other): Footprint's test on
+            // the first and on the last, all at once
+            const __m256 spread = _mm256_add_ps(_mm256_sub_ps(c1, c0), _mm256_sub_ps(rr1, rr0));
+            const unsigned single = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, _mm256_setzero_ps(), _CMP_EQ_OQ)));
+            const unsigned pair = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, _mm256_set1_ps(1), _CMP_EQ_OQ)));
+            const auto [at_first, at_last] = projected_.may_cover8(q, c0, rr0, c1, rr1);
+            const unsigned first_ok = unsigned(_mm256_movemask_ps(at_first)), last_ok = unsigned(_mm256_movemask_ps(at_last));
             alignas(32) int32_t rect[4][8];  // in the block's coordinates
             alignas(32) float near[8];
             const __m256 to_c = _mm256_set1_ps(float(i0_)), to_r = _mm256_set1_ps(float(r0_));
@@ -314,12 +319,18 @@ class TileTracer {
             for (; lanes != 0; lanes &= lanes - 1) {
                 const int k = __builtin_ctz(lanes);
                 const uint32_t triangle = i + uint32_t(k);
-                if (!(single >> k & 1)) {
+                if (!((single | pair) >> k & 1)) {
                     test_pixels(triangle, {rect[0][k], rect[1][k], rect[2][k], rect[3][k], near[k]});
-                } else if (double(near[k]) <= depth_bound_[rect[0][k] + rect[2][k] * kStride]) {
-                    scene_.prefetch_points(triangle);
-                    try_pixel(rect[0][k], rect[2][k], triangle);
+                    continue;
                 }
+                bool fetched = false;
+                const auto test = [&](int64_t c, int64_t r) {
+                    if (double(near[k]) > depth_bound_[c + r * kStride]) return;
+                    if (!fetched) scene_.prefetch_points(triangle), fetched = true;
+                    try_pixel(c, r, triangle);
+                };
+                if (first_ok >> k & 1) test(rect[0][k], rect[2][k]);
+                if ((pair & last_ok) >> k & 1) test(rect[1][k], rect[3][k]);
             }
         }
 #else
