@@ -316,7 +316,9 @@ class TileTracer {
             _mm256_store_si256(reinterpret_cast<__m256i*>(rect[2]), _mm256_cvtps_epi32(_mm256_sub_ps(rr0, to_r)));
             _mm256_store_si256(reinterpret_cast<__m256i*>(rect[3]), _mm256_cvtps_epi32(_mm256_sub_ps(rr1, to_r)));
             _mm256_store_ps(near, q.near);
-            for (; lanes != 0; lanes &= lanes - 1) {
+            // (lanes whose footprint misses their pixels are dropped here, not branched on)
+            const unsigned on_first = lanes & (single | pair) & first_ok, on_last = lanes & pair & last_ok;
+            for (lanes = (lanes & ~(single | pair)) | on_first | on_last; lanes != 0; lanes &= lanes - 1) {
                 const int k = __builtin_ctz(lanes);
                 const uint32_t triangle = i + uint32_t(k);
                 if (!((single | pair) >> k & 1)) {
@@ -329,8 +331,8 @@ class TileTracer {
                     if (!fetched) scene_.prefetch_points(triangle), fetched = true;
                     try_pixel(c, r, triangle);
                 };
-                if (first_ok >> k & 1) test(rect[0][k], rect[2][k]);
-                if ((pair & last_ok) >> k & 1) test(rect[1][k], rect[3][k]);
+                if (on_first >> k & 1) test(rect[0][k], rect[2][k]);
+                if (on_last >> k & 1) test(rect[1][k], rect[3][k]);
             }
         }
 #else
