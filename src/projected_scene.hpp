@@ -192,30 +192,11 @@ class ProjectedScene {
     ProjectedScene(const ProjectedScene&) = delete;
     ProjectedScene& operator=(const ProjectedScene&) = delete;
 
-    /// Projects worker `w`'s share of the points (of `workers`).
-    void project(unsigned w, unsigned workers) {
-        const std::size_t n = scene_.points.size() / 3, end = n * (w + 1) / workers;
-        std::size_t i = n * w / workers;
-#if defined(__AVX__)
-        for (; i + 4 <= end; i += 4) project4(i);
-#endif
-        for (; i < end; ++i) {
-            const double* p = scene_.point(uint32_t(i));
-            const CameraSpec& c = rays_.spec();
-            const double q[3] = {p[0] - c.eye[0], p[1] - c.eye[1], p[2] - c.eye[2]};
-            const double depth = dot(map_.depth, q);
-            const double den = c.parallel ? 1.0 : depth;
-            float* out = points_ + 4 * i;
-            out[2] = float(depth);
-            out[3] = 0;
-            if (!c.parallel && !(den > CameraRays::PixelMap::kMinDen * (std::fabs(q[0]) + std::fabs(q[1]) + std::fabs(q[2])))) {
-                out[0] = out[1] = 0;
-                out[3] = 1;  // no usable projection
-                continue;
-            }
-            out[0] = float((dot(map_.col, q) + map_.col0) / den);
-            out[1] = float((dot(map_.row, q) + map_.row0) / den);
-        }
+    /// Projects the points, with the other workers: each takes runs of them until none is
+    /// left (not a fixed share, so a worker the machine holds up delays no one).
+    void project() {
+        const std::size_t n = scene_.points.size() / 3;
+        for (std::size_t k; (k = next_run_.fetch_add(1)) * kRun < n;) project(k * kRun, std::min(n, (k + 1) * kRun));
     }
 
     /// Through a BVH, once every point is projected, the node rectangles: whole subtrees
@@ -404,6 +385,30 @@ class ProjectedScene {
     [[nodiscard]] float margin() const { return margin_; }                ///< see Footprint
 
    private:
+    /// Projects points i to end - 1.
+    void project(std::size_t i, std::size_t end) {
+#if defined(__AVX__)
+        for (; i + 4 <= end; i += 4) project4(i);
+#endif
+        for (; i < end; ++i) {
+            const double* p = scene_.point(uint32_t(i));
+            const CameraSpec& c = rays_.spec();
+            const double q[3] = {p[0] - c.eye[0], p[1] - c.eye[1], p[2] - c.eye[2]};
+            const double depth = dot(map_.depth, q);
+            const double den = c.parallel ? 1.0 : depth;
+            float* out = points_ + 4 * i;
+            out[2] = float(depth);
+            out[3] = 0;
+            if (!c.parallel && !(den > CameraRays::PixelMap::kMinDen * (std::fabs(q[0]) + std::fabs(q[1]) + std::fabs(q[2])))) {
+                out[0] = out[1] = 0;
+                out[3] = 1;  // no usable projection
+                continue;
+            }
+            out[0] = float((dot(map_.col, q) + map_.col0) / den);
+            out[1] = float((dot(map_.row, q) + map_.row0) / den);
+        }
+    }
+
 #if defined(__AVX__)
     /// Points i to i + 3, as the loop in `project` does them one by one (the same
     /// operations in the same order: the same floats), four lanes at a time.
@@ -588,6 +593,8 @@ class ProjectedScene {
     std::vector<Subtree> subtrees_;
     std::vector<uint32_t> top_;
     std::atomic<std::size_t> next_subtree_{0};
+    static constexpr std::size_t kRun = 1 << 14;  // points a worker projects at a time (a multiple of 4)
+    std::atomic<std::size_t> next_run_{0};
 #if defined(__SSE4_1__)
     __m128 margin4_, floor4_, ceil4_, any4_, none4_;  // per lane of (c0, c1, r0, r1)
 #endif

@@ -123,7 +123,7 @@ struct CameraCast {
     /// when no pixel may see the scene: every tile is then a miss.
     std::vector<uint32_t> prepare(unsigned w, unsigned workers, const CameraRays& rays) {
         if (!rays.may_hit()) return {};
-        projected.project(w, workers);
+        projected.project();
         barrier.wait();
         if (!bins) {
             projected.frame_subtrees();
