@@ -94,6 +94,7 @@ class Footprint {
         return below == 15 || above == 15 ? kInside : kMay;
     }
     [[nodiscard]] bool may_cover(int64_t col, int64_t r) const { return cover(col, row(r)) != kNone; }
+    [[nodiscard]] Cover cover_at(int64_t col, int64_t r) const { return cover(col, row(r)); }
 
    private:
     __m128 x_, y_, ex_, ey_, slack_, minus_slack_;
@@ -118,6 +119,7 @@ class Footprint {
         const Double4 e = ex_ * (double(r) - y_) - ey_ * (double(col) - x_);
         return !known_ || !(any(e < -slack_) && any(e > slack_));
     }
+    [[nodiscard]] Cover cover_at(int64_t col, int64_t r) const { return may_cover(col, r) ? kMay : kNone; }
 
    private:
     Double4 x_, y_, ex_, ey_, slack_;
@@ -179,6 +181,10 @@ class ProjectedScene {
         margin_ = up(margin);
         slack_ = std::max(up(2 * depth_slack_), std::numeric_limits<float>::min());
         near_ = -up(-c.near), far_ = up(c.far);  // rounded outward
+        // A triangle's depths must clear the camera's range by more than the kernel's and
+        // the ray's t range's roundings (tiny beside 2^-20) for its hit to be sure (`sure`).
+        sure_near_ = up(c.near + std::fabs(c.near) * 0x1p-20 + slack_);
+        sure_far_ = std::isinf(c.far) ? HUGE_VALF : -up(-(c.far - std::fabs(c.far) * 0x1p-20 - slack_));
 #if defined(__SSE4_1__)
         const float nx = float(c.nx), ny = float(c.ny);
         margin4_ = _mm_setr_ps(-margin_, margin_, -margin_, margin_);
@@ -250,6 +256,12 @@ class ProjectedScene {
         return near > far_ || far < near_ ? HUGE_VALF : near;
     }
 
+    /// Whether a triangle whose depths lie within [near, far] (its bounds from `triangles8`)
+    /// and whose footprint surely covers a pixel (Footprint::kInside) is surely hit by the
+    /// watertight kernel in double on that pixel's ray, within the ray's t range: its
+    /// depths clear the camera's [near, far] by more than any rounding of t.
+    [[nodiscard]] bool sure(float near, float far) const { return near > sure_near_ && far < sure_far_; }
+
     /// Through a BVH, triangle i's rectangle (leaf order).
     [[nodiscard]] ImageRect triangle(uint32_t i) const {
         ImageRect rect;
@@ -262,7 +274,7 @@ class ProjectedScene {
     /// the nearest depth, as `triangle` computes them one at a time; and for Footprint's
     /// test, their projected points and which have a point with no usable projection.
     struct Rects8 {
-        __m256 c0, c1, r0, r1, near, x[3], y[3], unknown;
+        __m256 c0, c1, r0, r1, near, far, x[3], y[3], unknown;
     };
     /// Triangles first .. first + n - 1 (leaf order, 1 <= n <= 8; lanes from n on are
     /// empty). The same operations on the same floats as rect4, so the same rectangles;
@@ -298,7 +310,8 @@ class ProjectedScene {
                      slack = _mm256_set1_ps(slack_), margin = _mm256_set1_ps(margin_);
         const __m256 lo_z = lowest(z), hi_z = highest(z);
         r.near = _mm256_sub_ps(lo_z, _mm256_add_ps(_mm256_mul_ps(_mm256_and_ps(lo_z, abs_mask), rel), slack));
-        const __m256 far = _mm256_add_ps(hi_z, _mm256_add_ps(_mm256_mul_ps(_mm256_and_ps(hi_z, abs_mask), rel), slack));
+        r.far = _mm256_add_ps(hi_z, _mm256_add_ps(_mm256_mul_ps(_mm256_and_ps(hi_z, abs_mask), rel), slack));
+        const __m256 far = r.far;
         const CameraSpec& c = rays_.spec();
         const __m256 zero = _mm256_setzero_ps();
         r.unknown = _mm256_cmp_ps(flag, zero, _CMP_NEQ_UQ);
@@ -322,10 +335,14 @@ class ProjectedScene {
         r.near = _mm256_blendv_ps(r.near, _mm256_set1_ps(HUGE_VALF), empty);
         return r;
     }
-    /// Which lanes of `q` may be hit by the ray of their pixel at (col0, row0), and which
-    /// by that of their pixel at (col1, row1): Footprint's test, the same operations on the
-    /// same floats, eight triangles at once.
-    [[nodiscard]] std::pair<__m256, __m256> may_cover8(const Rects8& q, __m256 col0, __m256 row0, __m256 col1, __m256 row1) const {
+    /// Footprint's test for eight triangles at once, at two pixels each: which lanes may be
+    /// hit by the ray of their pixel at (col0, row0) (may[0]) and of that at (col1, row1)
+    /// (may[1]), and which surely are (inside[p]: Footprint::kInside).
+    struct Cover8 {
+        __m256 may[2], inside[2];
+    };
+    /// The same operations on the same floats as Footprint's.
+    [[nodiscard]] Cover8 cover8(const Rects8& q, __m256 col0, __m256 row0, __m256 col1, __m256 row1) const {
         const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(INT32_MAX));
         const auto abs = [&](__m256 v) { return _mm256_and_ps(v, abs_mask); };
         __m256 size = _mm256_setzero_ps();
@@ -335,7 +352,9 @@ class ProjectedScene {
             _mm256_mul_ps(_mm256_set1_ps(1.01f), margin),
             _mm256_mul_ps(_mm256_set1_ps(0x1p-20f),
                           _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(3), size), margin), _mm256_set1_ps(2))));
-        __m256 below[2] = {}, above[2] = {};
+        const __m256 all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+        // per position: some edge below -slack, some above +slack; every edge below, above
+        __m256 below[2] = {}, above[2] = {}, all_below[2] = {all, all}, all_above[2] = {all, all};
         for (int k = 0; k < 3; ++k) {
             const __m256 ex = _mm256_sub_ps(q.x[(k + 1) % 3], q.x[k]), ey = _mm256_sub_ps(q.y[(k + 1) % 3], q.y[k]);
             const __m256 slack = _mm256_add_ps(_mm256_mul_ps(m, _mm256_add_ps(abs(ex), abs(ey))), _mm256_set1_ps(0x1p-120f));
@@ -343,13 +362,17 @@ class ProjectedScene {
             const __m256 col[2] = {col0, col1}, row[2] = {row0, row1};
             for (int p = 0; p < 2; ++p) {
                 const __m256 e = _mm256_sub_ps(_mm256_mul_ps(ex, _mm256_sub_ps(row[p], q.y[k])), _mm256_mul_ps(ey, _mm256_sub_ps(col[p], q.x[k])));
-                below[p] = _mm256_or_ps(below[p], _mm256_cmp_ps(e, minus_slack, _CMP_LT_OQ));
-                above[p] = _mm256_or_ps(above[p], _mm256_cmp_ps(e, slack, _CMP_GT_OQ));
+                const __m256 lt = _mm256_cmp_ps(e, minus_slack, _CMP_LT_OQ), gt = _mm256_cmp_ps(e, slack, _CMP_GT_OQ);
+                below[p] = _mm256_or_ps(below[p], lt), all_below[p] = _mm256_and_ps(all_below[p], lt);
+                above[p] = _mm256_or_ps(above[p], gt), all_above[p] = _mm256_and_ps(all_above[p], gt);
             }
         }
-        const __m256 all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
-        return {_mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[0], above[0]), all)),
-                _mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[1], above[1]), all))};
+        Cover8 out;
+        for (int p = 0; p < 2; ++p) {
+            out.may[p] = _mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[p], above[p]), all));
+            out.inside[p] = _mm256_andnot_ps(q.unknown, _mm256_or_ps(all_below[p], all_above[p]));
+        }
+        return out;
     }
 #endif
 
@@ -585,6 +608,7 @@ class ProjectedScene {
     ProjectedNode* node_;
     double to_anchor_[3], reach_[3], depth_slack_;
     float margin_, slack_, near_, far_;  // in single precision: see the constructor
+    float sure_near_, sure_far_;         // see `sure`
     /// A subtree: its root, then its other nodes [first, end) (empty for a leaf).
     struct Subtree {
         uint32_t root, first, end;

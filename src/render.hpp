@@ -52,6 +52,12 @@ class OutputWriter {
     void prefetch(const Hit<Real>& hit) const {
         if (hit.found()) __builtin_prefetch(scene_.prim_ids.data() + hit.prim);
     }
+    /// Whether only triangle ids are asked for (then a tile may settle a pixel without its
+    /// exact depth: TileTracer::test_pixel's sure hits).
+    [[nodiscard]] bool ids_only() const { return !out_.depth && !out_.barycentric; }
+    /// Ray k's hit is triangle `prim` (leaf order), and only its id is asked for.
+    void id(std::size_t k, uint32_t prim) const { out_.triangle_id[k] = int64_t(scene_.prim_ids[prim]); }
+    void prefetch_id(uint32_t prim) const { __builtin_prefetch(scene_.prim_ids.data() + prim); }
     /// Misses for rays k to k + n - 1.
     void misses(std::size_t k, std::size_t n) const {
         std::fill_n(out_.triangle_id + k, n, int64_t(-1));
@@ -186,7 +192,7 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         if constexpr (kTiles) {
             if (camera) {
                 const std::vector<uint32_t> unknown = camera->prepare(w, n_workers, rays);
-                TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context);
+                TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context, store.ids_only());
                 for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
                     if (camera->bins && rays.tile_may_hit(tile))
                         tracer.trace_bin(tile, *camera->bins, unknown, store);

@@ -16,10 +16,12 @@
 #include <cstdint>
 #include <limits>
 #include <optional>
+#include <type_traits>
 #include <vector>
 
 #include "camera_rays.hpp"
 #include "bin_triangles.hpp"
+#include "kernel_watertight.hpp"
 #include "projected_scene.hpp"
 #include "traverse.hpp"
 
@@ -30,6 +32,7 @@ namespace vrc {
 struct PixelRect {
     int64_t c0, c1, r0, r1;
     double near = -HUGE_VAL;
+    double far = HUGE_VAL;  ///< an upper bound on that depth (unknown: infinite)
 };
 
 template <template <class> class KernelT, class Real>
@@ -45,8 +48,11 @@ class TileTracer {
     };
 
    public:
-    TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, const CastContext& context)
-        : scene_(scene), rays_(rays), projected_(projected), context_(context), map_(rays.pixel_map()) {
+    /// `ids_only`: the cast asks for triangle ids only, not depths or weights (see `Claim`).
+    TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, const CastContext& context,
+               bool ids_only)
+        : scene_(scene), rays_(rays), projected_(projected), context_(context), map_(rays.pixel_map()),
+          sure_allowed_(ids_only && std::is_same_v<Kernel, Watertight<double>> && !context.cull_back_faces) {
         const int64_t n = kStride * kStride;
         ray_.resize(n);
         kernel_.resize(n);
@@ -57,6 +63,7 @@ class TileTracer {
         quad_.assign(n / 4, -HUGE_VAL);
         guess_far_.resize(n);
         guess_.resize(n);
+        sure_.resize(n);
     }
 
     /// Per-pixel arrays hold a whole tile (a packet, or a flat scene's block), row by row.
@@ -150,6 +157,7 @@ class TileTracer {
             for (int64_t c = 0; c < width_ + (width_ & 1); ++c)
                 depth_bound_[c + r * kStride] = c < width_ && r < height_ ? HUGE_VAL : -HUGE_VAL;
         std::fill(made_, made_ + kStride, 0);
+        std::fill(sure_bits_, sure_bits_ + kStride, 0);
         for (int64_t r = 0; r < (height_ + 1) / 2; ++r)
             for (int64_t c = 0; c < (width_ + 1) / 2; ++c) quad_[c + r * kQuads] = HUGE_VAL;
     }
@@ -159,16 +167,22 @@ class TileTracer {
         return q.c0 <= p.i1 && q.c1 >= p.i0 && q.r0 <= p.r1 && q.r1 >= p.r0;
     }
 
-    /// Stores the block's rows as misses, then the hits of the rays made.
+    /// Stores the block's rows as misses, then the hits of the rays made and the sure hits.
     template <class Store>
     void finish(Store& store) {
-        for (int64_t r = 0; r < height_; ++r)
+        for (int64_t r = 0; r < height_; ++r) {
             for (uint64_t m = made_[r]; m != 0; m &= m - 1) store.prefetch(hit_[__builtin_ctzll(m) + r * kStride]);
+            for (uint64_t m = sure_bits_[r]; m != 0; m &= m - 1) store.prefetch_id(sure_[__builtin_ctzll(m) + r * kStride]);
+        }
         for (int64_t r = 0; r < height_; ++r) {
             store.misses(pixel(r * kStride), std::size_t(width_));
             for (uint64_t m = made_[r]; m != 0; m &= m - 1) {
                 const int64_t j = __builtin_ctzll(m) + r * kStride;
                 if (hit_[j].found()) store(pixel(j), ray_[j], hit_[j]);
+            }
+            for (uint64_t m = sure_bits_[r]; m != 0; m &= m - 1) {
+                const int64_t j = __builtin_ctzll(m) + r * kStride;
+                store.id(pixel(j), sure_[j]);
             }
         }
     }
@@ -306,33 +320,37 @@ class TileTracer {
             const __m256 spread = _mm256_add_ps(_mm256_sub_ps(c1, c0), _mm256_sub_ps(rr1, rr0));
             const unsigned single = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, _mm256_setzero_ps(), _CMP_EQ_OQ)));
             const unsigned pair = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, _mm256_set1_ps(1), _CMP_EQ_OQ)));
-            const auto [at_first, at_last] = projected_.may_cover8(q, c0, rr0, c1, rr1);
-            const unsigned first_ok = unsigned(_mm256_movemask_ps(at_first)), last_ok = unsigned(_mm256_movemask_ps(at_last));
+            const ProjectedScene::Cover8 cover = projected_.cover8(q, c0, rr0, c1, rr1);
+            const unsigned first_ok = unsigned(_mm256_movemask_ps(cover.may[0])), last_ok = unsigned(_mm256_movemask_ps(cover.may[1]));
+            const unsigned sure = sure_allowed_ ? ~0u : 0u;
+            const unsigned first_in = sure & unsigned(_mm256_movemask_ps(cover.inside[0])),
+                           last_in = sure & unsigned(_mm256_movemask_ps(cover.inside[1]));
             alignas(32) int32_t rect[4][8];  // in the block's coordinates
-            alignas(32) float near[8];
+            alignas(32) float near[8], far[8];
             const __m256 to_c = _mm256_set1_ps(float(i0_)), to_r = _mm256_set1_ps(float(r0_));
             _mm256_store_si256(reinterpret_cast<__m256i*>(rect[0]), _mm256_cvtps_epi32(_mm256_sub_ps(c0, to_c)));
             _mm256_store_si256(reinterpret_cast<__m256i*>(rect[1]), _mm256_cvtps_epi32(_mm256_sub_ps(c1, to_c)));
             _mm256_store_si256(reinterpret_cast<__m256i*>(rect[2]), _mm256_cvtps_epi32(_mm256_sub_ps(rr0, to_r)));
             _mm256_store_si256(reinterpret_cast<__m256i*>(rect[3]), _mm256_cvtps_epi32(_mm256_sub_ps(rr1, to_r)));
             _mm256_store_ps(near, q.near);
+            _mm256_store_ps(far, q.far);
             // (lanes whose footprint misses their pixels are dropped here, not branched on)
             const unsigned on_first = lanes & (single | pair) & first_ok, on_last = lanes & pair & last_ok;
             for (lanes = (lanes & ~(single | pair)) | on_first | on_last; lanes != 0; lanes &= lanes - 1) {
                 const int k = __builtin_ctz(lanes);
                 const uint32_t triangle = i + uint32_t(k);
                 if (!((single | pair) >> k & 1)) {
-                    test_pixels(triangle, {rect[0][k], rect[1][k], rect[2][k], rect[3][k], near[k]});
+                    test_pixels(triangle, {rect[0][k], rect[1][k], rect[2][k], rect[3][k], near[k], far[k]});
                     continue;
                 }
                 bool fetched = false;
-                const auto test = [&](int64_t c, int64_t r) {
+                const auto test = [&](int64_t c, int64_t r, bool inside) {
                     if (double(near[k]) > depth_bound_[c + r * kStride]) return;
-                    if (!fetched) scene_.prefetch_points(triangle), fetched = true;
-                    try_pixel(c, r, triangle);
+                    if (!fetched && !inside) scene_.prefetch_points(triangle), fetched = true;  // (for the kernel)
+                    try_pixel(c, r, triangle, {inside, near[k], far[k]});
                 };
-                if (on_first >> k & 1) test(rect[0][k], rect[2][k]);
-                if (on_last >> k & 1) test(rect[1][k], rect[3][k]);
+                if (on_first >> k & 1) test(rect[0][k], rect[2][k], first_in >> k & 1);
+                if (on_last >> k & 1) test(rect[1][k], rect[3][k], last_in >> k & 1);
             }
         }
 #else
@@ -361,14 +379,23 @@ class TileTracer {
                     scene_.prefetch_points(i);  // for the kernel, while the footprint is set up
                     footprint.emplace(projected_.footprint(i));
                 }
-                if (footprint->may_cover(i0_ + c, r0_ + r)) try_pixel(c, r, i);
+                const Footprint::Cover cover = footprint->cover_at(i0_ + c, r0_ + r);
+                if (cover != Footprint::kNone)
+                    try_pixel(c, r, i, {sure_allowed_ && cover == Footprint::kInside, float(rect.near), float(rect.far)});
             }
     }
 
+    /// What a candidate triangle claims of a pixel: whether its footprint surely covers the
+    /// pixel's centre (Footprint::kInside, and sure hits allowed), and bounds on its depths.
+    struct Claim {
+        bool inside = false;
+        float near = -HUGE_VALF, far = HUGE_VALF;
+    };
+
     /// Tests triangle i on the block's ray at column c, row r; on a closer hit, the depth
     /// bounds of the ray and of its quad follow.
-    void try_pixel(int64_t c, int64_t r, uint32_t i) {
-        if (!test_pixel(c, r, i)) return;
+    void try_pixel(int64_t c, int64_t r, uint32_t i, Claim claim = {}) {
+        if (!test_pixel(c, r, i, claim)) return;
         const int64_t q = 2 * (c >> 1) + 2 * (r >> 1) * kStride;  // the quad's first pixel
         quad_[(c >> 1) + (r >> 1) * kQuads] = std::max(std::max(depth_bound_[q], depth_bound_[q + 1]),
                                                        std::max(depth_bound_[q + kStride], depth_bound_[q + kStride + 1]));
@@ -376,12 +403,39 @@ class TileTracer {
 
     /// Tests triangle i on the block's ray at column c, row r; on a closer hit, the ray's
     /// depth bound follows and this returns true.
-    bool test_pixel(int64_t c, int64_t r, uint32_t i) {
+    ///
+    /// A sure hit settles a pixel without its ray when only triangle ids are asked for: the
+    /// first candidate of a pixel whose footprint surely covers its centre, in double with
+    /// the watertight kernel, is recorded with its depth bounds and no kernel call. Why
+    /// that is the kernel's answer: its centre lies inside every edge by more than the
+    /// slack, so (Footprint's argument, reversed) the exact ray passes strictly inside the
+    /// exact triangle, and the kernel's edge functions take their exact signs (its
+    /// exact_if_close), so it hits, within the t range (ProjectedScene::sure). A later
+    /// candidate is culled when its nearest depth lies beyond the sure hit's farthest: each
+    /// bound clears the exact depths by the depth slack plus 2^-21 relative, far beyond the
+    /// kernel's rounding of t and its tie tolerance, so the kernel would rank it behind.
+    /// Any other candidate makes the ray, and the kernel tests the sure hit, then it.
+    bool test_pixel(int64_t c, int64_t r, uint32_t i, Claim claim = {}) {
         const int64_t j = c + r * kStride;
-        if (!(made_[r] >> c & 1)) make_ray(j);
+        const uint64_t bit = uint64_t(1) << c;
+        bool settled = false;  // a sure hit was just tested with the kernel
+        if (!(made_[r] & bit)) {
+            if (!(sure_bits_[r] & bit) && claim.inside && projected_.sure(claim.near, claim.far)) {
+                sure_bits_[r] |= bit;
+                sure_[j] = i;
+                depth_bound_[j] = double(claim.far);
+                return true;
+            }
+            make_ray(j);
+            if (sure_bits_[r] & bit) {
+                sure_bits_[r] &= ~bit;
+                test_triangle(*kernel_[j], scene_, sure_[j], ray_[j].tmin, bound_[j], hit_[j]);
+                settled = true;
+            }
+        }
         const double before = bound_[j];
         test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
-        if (bound_[j] == before) return false;
+        if (bound_[j] == before && !settled) return false;
         depth_bound_[j] = bound_[j] * scale_[j] * (1 + 1e-12) + projected_.depth_slack();  // rounded up
         return true;
     }
@@ -404,6 +458,9 @@ class TileTracer {
     Mask4 side_hi_[3];                         // lanes whose plane takes the box's hi corner on axis k
     int64_t i0_ = 0, r0_ = 0, width_ = 0, height_ = 0;  // the block: a tile
     uint64_t made_[kStride];  // per row of the block, a bit for each pixel whose ray is made
+    uint64_t sure_bits_[kStride];  // per row, a bit for each pixel settled by a sure hit (not made)
+    bool sure_allowed_;            // see test_pixel
+    std::vector<uint32_t> sure_;   // the sure hit of each such pixel
     std::vector<Ray> ray_;                       // ray_, kernel_ and hit_: set for the rays made only
     std::vector<std::optional<Kernel>> kernel_;  // (optional: kernels have no default state)
     std::vector<Hit<Real>> hit_;

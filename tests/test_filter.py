@@ -159,8 +159,10 @@ def test_progress_events_and_abort():
     source.SetThetaResolution(400)
     source.SetPhiResolution(400)
     camera = make_camera()
-    caster = make_filter(camera, nx=2000, ny=2000)
-    caster.SetArrays(["TriangleId"])
+    caster = make_filter(camera, nx=3000, ny=3000)
+    # (with depths: ids alone settle this sphere's pixels without rays, too fast to stop
+    # after the first progress event, at 50 ms)
+    caster.SetArrays(["TriangleId", "Depth"])
     caster.SetThreads(1)
     caster.SetInputConnection(source.GetOutputPort())
     progress = []
@@ -184,7 +186,7 @@ def test_progress_events_and_abort():
     caster.RemoveObserver(tag)
     camera.Azimuth(5)
     caster.Update()  # the next update runs to the end again
-    assert caster.GetOutput().GetNumberOfPoints() == 2000 * 2000
+    assert caster.GetOutput().GetNumberOfPoints() == 3000 * 3000
 
 
 def test_pv_wrap_of_the_output():

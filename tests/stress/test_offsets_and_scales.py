@@ -54,6 +54,9 @@ def test_from_outside(case, precision):
     ref = exact_first_hits(scene.prepared.points, scene.prepared.triangles, origins, directions)
     masks = classify(ref, image["TriangleId"])
     assert masks["correct"].all()
+    # ids alone: most pixels settled by sure hits, without their rays (traverse_tile.hpp)
+    ids_only = scene.cast(cam, arrays=["TriangleId"], precision=precision)["TriangleId"]
+    assert classify(ref, ids_only)["correct"].all()
     hit = image["TriangleId"] >= 0
     assert hit.mean() > 0.3
     np.testing.assert_allclose(image["Depth"][hit], ref.t[hit] * cam.d, rtol=RTOL[precision])
