@@ -90,6 +90,23 @@ def main() -> None:
     )
     rows.append(one_shot[:5] + (ours / one_shot[4],) + one_shot[6:])
     print(rows[-1], flush=True)
+    # Ids alone let tiles settle most pixels without a ray (sure hits, traverse_tile.hpp);
+    # with depths every hit pixel's ray is made and tested, as the peers' always are.
+    with_depth = median_of(lambda: scene.cast(cam, arrays=["TriangleId", "Depth"]))
+    rows.append(
+        (
+            "vtkraycast Scene, with Depth",
+            os.cpu_count(),
+            build,
+            float("nan"),
+            with_depth,
+            ours / with_depth,
+            float(np.mean(np.asarray(scene.cast(cam, arrays=["TriangleId", "Depth"])["TriangleId"]) == ids)),
+            per_triangle,
+            float("nan"),
+        )
+    )
+    print(rows[-1], flush=True)
 
     origins, directions = camera_rays(cam)
     points, triangles = scene.prepared.points, scene.prepared.triangles
@@ -118,8 +135,13 @@ def main() -> None:
         theirs = float(np.median(times))
         if isinstance(peer, Open3DPeer) and len(chosen) == rays:
             pairs = 12 * args.repeats  # (a tenth of a second each: 15 pairs left quartiles 0.7x apart)
-            recast = partial(scene.cast, cam, arrays=["TriangleId"])
-            alternated = (pairs, *alternated_ratio(recast, partial(peer.run, prepared), pairs))
+            alternated = {
+                label: (
+                    pairs,
+                    *alternated_ratio(partial(scene.cast, cam, arrays=arrays), partial(peer.run, prepared), pairs),
+                )
+                for label, arrays in (("TriangleId", ["TriangleId"]), ("TriangleId and Depth", ["TriangleId", "Depth"]))
+            }
         agree = float(np.mean(peer.collect(out).ids == ids[chosen]))
         scale = rays / len(chosen)  # a sampled peer's times, scaled to the whole image
         label = peer.name + ("" if len(chosen) == rays else f" [{len(chosen)} rays sampled]")
@@ -151,18 +173,18 @@ def main() -> None:
     for name, threads, b, f, c, ratio, agree, mem, grown in rows:
         mem_text = "-" if np.isnan(mem) else f"{mem:.1f}"
         grown_text = "-" if np.isnan(grown) else f"{grown:.0f}"
+        first_text = "-" if np.isnan(f) else f"{f:.3f}"
         lines.append(
-            f"| {name} | {threads} | {b:.3f} | {f:.3f} | {c:.4f} | {rays / c / 1e6:.2f} | {1 / ratio:.2f}x "
+            f"| {name} | {threads} | {b:.3f} | {first_text} | {c:.4f} | {rays / c / 1e6:.2f} | {1 / ratio:.2f}x "
             f"| {agree:.4%} | {mem_text} | {grown_text} |"
         )
     by_name = {row[0]: row for row in rows}
     open3d = by_name.get(Open3DPeer.name)
     if open3d is not None:
-        if alternated is not None:
-            pairs, median, q1, q3 = alternated
+        for label, (pairs, median, q1, q3) in (alternated or {}).items():
             lines += [
                 "",
-                f"Re-casts timed in alternation with Open3D's cast ({pairs} pairs): Open3D's time over "
+                f"Re-casts of {label} timed in alternation with Open3D's cast ({pairs} pairs): Open3D's time over "
                 f"vtkraycast's, median {median:.2f}x (quartiles {q1:.2f}x to {q3:.2f}x).",
             ]
         lines += [
@@ -191,7 +213,7 @@ def plot(rows, rays: int, machine: str, path: Path) -> None:
     left.barh(y, [rays / row[4] / 1e6 for row in rows], color=colours)
     left.set_xscale("log")
     left.set_xlabel("camera rays per second, re-cast (millions, log)")
-    right.barh(y, [row[3] for row in rows], color=colours)
+    right.barh(y, [0 if np.isnan(row[3]) else row[3] for row in rows], color=colours)
     right.set_xscale("log")
     right.set_xlabel("first image: preparation + cast (s, log)")
     left.set_yticks(y, names)

@@ -94,7 +94,6 @@ class Footprint {
         return below == 15 || above == 15 ? kInside : kMay;
     }
     [[nodiscard]] bool may_cover(int64_t col, int64_t r) const { return cover(col, row(r)) != kNone; }
-    [[nodiscard]] Cover cover_at(int64_t col, int64_t r) const { return cover(col, row(r)); }
 
    private:
     __m128 x_, y_, ex_, ey_, slack_, minus_slack_;
@@ -119,7 +118,6 @@ class Footprint {
         const Double4 e = ex_ * (double(r) - y_) - ey_ * (double(col) - x_);
         return !known_ || !(any(e < -slack_) && any(e > slack_));
     }
-    [[nodiscard]] Cover cover_at(int64_t col, int64_t r) const { return may_cover(col, r) ? kMay : kNone; }
 
    private:
     Double4 x_, y_, ex_, ey_, slack_;
@@ -177,7 +175,8 @@ class ProjectedScene {
         // that can fall in the image: one farther out clamps to the border whatever its
         // rounding. Rounded up to single precision, as is twice the depth slack (at least
         // the smallest normal float, which covers a subnormal depth's rounding).
-        const double margin = map_.margin + (c.parallel ? 16 * kEps * parallel_size : 0) + 0x1p-21 * double(std::max(c.nx, c.ny) + 2);
+        projection_margin_ = map_.margin + (c.parallel ? 16 * kEps * parallel_size : 0);
+        const double margin = projection_margin_ + 0x1p-21 * double(std::max(c.nx, c.ny) + 2);
         margin_ = up(margin);
         slack_ = std::max(up(2 * depth_slack_), std::numeric_limits<float>::min());
         near_ = -up(-c.near), far_ = up(c.far);  // rounded outward
@@ -256,11 +255,48 @@ class ProjectedScene {
         return near > far_ || far < near_ ? HUGE_VALF : near;
     }
 
-    /// Whether a triangle whose depths lie within [near, far] (its bounds from `triangles8`)
-    /// and whose footprint surely covers a pixel (Footprint::kInside) is surely hit by the
-    /// watertight kernel in double on that pixel's ray, within the ray's t range: its
-    /// depths clear the camera's [near, far] by more than any rounding of t.
-    [[nodiscard]] bool sure(float near, float far) const { return near > sure_near_ && far < sure_far_; }
+    /// Whether the watertight kernel, in double, surely hits triangle i (leaf order) on the
+    /// ray of the pixel at column `col`, row `row`, within the ray's t range, given bounds
+    /// [near, far] on the triangle's depths (from `triangles8`).
+    ///
+    /// Why: the projection's margin bounds, per coordinate, the distance of the pixel centre
+    /// p from the exact projection p* of its ray plus that of a point's projection from its
+    /// exact one (CameraRays::PixelMap); with the stored single-precision rounding of the
+    /// points (2^-24 of their largest coordinate, `size`; 2^-23 is allowed), M bounds both
+    /// |p* - p| + |A' - A| and |A' - A| for each stored point A and its exact projection A'.
+    /// For the edge from A to B, E(p) = (B - A) x (p - A) differs from the exact E'(p*) =
+    /// (B' - A') x (p* - A') by (B - A) x (p* - p - A' + A) + (B' - B - A' + A) x (p - A) +
+    /// the product of the two perturbations: at most M |B - A| + 2M |p - A| + 4M^2 (|.| the
+    /// 1-norm; p - B serves as well as p - A). Evaluated in double from the stored floats, E carries no
+    /// rounding worth the name (2^-48 of its terms is allowed). When all three edges clear
+    /// that bound with one sign, every exact edge function at p* has that sign: the exact ray
+    /// passes strictly inside the exact triangle (a central or parallel projection keeps the
+    /// sign of det[A - O, B - O, d] for points in front). The kernel's edge functions take
+    /// their exact signs (Watertight::exact_if_close), so it hits; and its t lies within the
+    /// ray's range when the depths clear the camera's [near, far] (sure_near_, sure_far_).
+    [[nodiscard]] bool surely_hit(uint32_t i, int64_t col, int64_t row, float near, float far) const {
+        if (!(near > sure_near_ && far < sure_far_)) return false;
+        const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
+        const float* p[3] = {(*this)[tri[0]], (*this)[tri[1]], (*this)[tri[2]]};
+        if (p[0][3] + p[1][3] + p[2][3] != 0) return false;  // a point with no usable projection
+        const double x = double(col), y = double(row);
+        double size = 0;
+        for (int k = 0; k < 3; ++k) size = std::max(size, std::max(std::fabs(double(p[k][0])), std::fabs(double(p[k][1]))));
+        const double m = projection_margin_ + 0x1p-23 * size;
+        int below = 0, above = 0;
+        for (int k = 0; k < 3; ++k) {
+            const float *a = p[k], *b = p[(k + 1) % 3];
+            const double ex = double(b[0]) - double(a[0]), ey = double(b[1]) - double(a[1]);
+            const double dx = x - double(a[0]), dy = y - double(a[1]);
+            const double e = ex * dy - ey * dx;
+            const double from_a = std::fabs(dx) + std::fabs(dy), from_b = std::fabs(x - double(b[0])) + std::fabs(y - double(b[1]));
+            const double edge = std::fabs(ex) + std::fabs(ey);
+            const double bound = (m * (edge + 2 * std::min(from_a, from_b)) + 4 * m * m + 0x1p-48 * edge * from_a) * (1 + 0x1p-40) + 0x1p-1000;
+            below += e < -bound;
+            above += e > bound;
+        }
+        return below == 3 || above == 3;
+    }
 
     /// Through a BVH, triangle i's rectangle (leaf order).
     [[nodiscard]] ImageRect triangle(uint32_t i) const {
@@ -335,14 +371,10 @@ class ProjectedScene {
         r.near = _mm256_blendv_ps(r.near, _mm256_set1_ps(HUGE_VALF), empty);
         return r;
     }
-    /// Footprint's test for eight triangles at once, at two pixels each: which lanes may be
-    /// hit by the ray of their pixel at (col0, row0) (may[0]) and of that at (col1, row1)
-    /// (may[1]), and which surely are (inside[p]: Footprint::kInside).
-    struct Cover8 {
-        __m256 may[2], inside[2];
-    };
-    /// The same operations on the same floats as Footprint's.
-    [[nodiscard]] Cover8 cover8(const Rects8& q, __m256 col0, __m256 row0, __m256 col1, __m256 row1) const {
+    /// Which lanes of `q` may be hit by the ray of their pixel at (col0, row0), and which
+    /// by that of their pixel at (col1, row1): Footprint's test, the same operations on the
+    /// same floats, eight triangles at once.
+    [[nodiscard]] std::pair<__m256, __m256> may_cover8(const Rects8& q, __m256 col0, __m256 row0, __m256 col1, __m256 row1) const {
         const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(INT32_MAX));
         const auto abs = [&](__m256 v) { return _mm256_and_ps(v, abs_mask); };
         __m256 size = _mm256_setzero_ps();
@@ -352,9 +384,7 @@ class ProjectedScene {
             _mm256_mul_ps(_mm256_set1_ps(1.01f), margin),
             _mm256_mul_ps(_mm256_set1_ps(0x1p-20f),
                           _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(3), size), margin), _mm256_set1_ps(2))));
-        const __m256 all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
-        // per position: some edge below -slack, some above +slack; every edge below, above
-        __m256 below[2] = {}, above[2] = {}, all_below[2] = {all, all}, all_above[2] = {all, all};
+        __m256 below[2] = {}, above[2] = {};
         for (int k = 0; k < 3; ++k) {
             const __m256 ex = _mm256_sub_ps(q.x[(k + 1) % 3], q.x[k]), ey = _mm256_sub_ps(q.y[(k + 1) % 3], q.y[k]);
             const __m256 slack = _mm256_add_ps(_mm256_mul_ps(m, _mm256_add_ps(abs(ex), abs(ey))), _mm256_set1_ps(0x1p-120f));
@@ -362,17 +392,13 @@ class ProjectedScene {
             const __m256 col[2] = {col0, col1}, row[2] = {row0, row1};
             for (int p = 0; p < 2; ++p) {
                 const __m256 e = _mm256_sub_ps(_mm256_mul_ps(ex, _mm256_sub_ps(row[p], q.y[k])), _mm256_mul_ps(ey, _mm256_sub_ps(col[p], q.x[k])));
-                const __m256 lt = _mm256_cmp_ps(e, minus_slack, _CMP_LT_OQ), gt = _mm256_cmp_ps(e, slack, _CMP_GT_OQ);
-                below[p] = _mm256_or_ps(below[p], lt), all_below[p] = _mm256_and_ps(all_below[p], lt);
-                above[p] = _mm256_or_ps(above[p], gt), all_above[p] = _mm256_and_ps(all_above[p], gt);
+                below[p] = _mm256_or_ps(below[p], _mm256_cmp_ps(e, minus_slack, _CMP_LT_OQ));
+                above[p] = _mm256_or_ps(above[p], _mm256_cmp_ps(e, slack, _CMP_GT_OQ));
             }
         }
-        Cover8 out;
-        for (int p = 0; p < 2; ++p) {
-            out.may[p] = _mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[p], above[p]), all));
-            out.inside[p] = _mm256_andnot_ps(q.unknown, _mm256_or_ps(all_below[p], all_above[p]));
-        }
-        return out;
+        const __m256 all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+        return {_mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[0], above[0]), all)),
+                _mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[1], above[1]), all))};
     }
 #endif
 
@@ -608,7 +634,8 @@ class ProjectedScene {
     ProjectedNode* node_;
     double to_anchor_[3], reach_[3], depth_slack_;
     float margin_, slack_, near_, far_;  // in single precision: see the constructor
-    float sure_near_, sure_far_;         // see `sure`
+    float sure_near_, sure_far_;         // see `surely_hit`
+    double projection_margin_;           // the projection's own margin (in margin_, with the storage's)
     /// A subtree: its root, then its other nodes [first, end) (empty for a leaf).
     struct Subtree {
         uint32_t root, first, end;

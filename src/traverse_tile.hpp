@@ -48,7 +48,7 @@ class TileTracer {
     };
 
    public:
-    /// `ids_only`: the cast asks for triangle ids only, not depths or weights (see `Claim`).
+    /// `ids_only`: the cast asks for triangle ids only, not depths or weights (see test_pixel).
     TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, const CastContext& context,
                bool ids_only)
         : scene_(scene), rays_(rays), projected_(projected), context_(context), map_(rays.pixel_map()),
@@ -320,11 +320,8 @@ class TileTracer {
             const __m256 spread = _mm256_add_ps(_mm256_sub_ps(c1, c0), _mm256_sub_ps(rr1, rr0));
             const unsigned single = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, _mm256_setzero_ps(), _CMP_EQ_OQ)));
             const unsigned pair = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, _mm256_set1_ps(1), _CMP_EQ_OQ)));
-            const ProjectedScene::Cover8 cover = projected_.cover8(q, c0, rr0, c1, rr1);
-            const unsigned first_ok = unsigned(_mm256_movemask_ps(cover.may[0])), last_ok = unsigned(_mm256_movemask_ps(cover.may[1]));
-            const unsigned sure = sure_allowed_ ? ~0u : 0u;
-            const unsigned first_in = sure & unsigned(_mm256_movemask_ps(cover.inside[0])),
-                           last_in = sure & unsigned(_mm256_movemask_ps(cover.inside[1]));
+            const auto [at_first, at_last] = projected_.may_cover8(q, c0, rr0, c1, rr1);
+            const unsigned first_ok = unsigned(_mm256_movemask_ps(at_first)), last_ok = unsigned(_mm256_movemask_ps(at_last));
             alignas(32) int32_t rect[4][8];  // in the block's coordinates
             alignas(32) float near[8], far[8];
             const __m256 to_c = _mm256_set1_ps(float(i0_)), to_r = _mm256_set1_ps(float(r0_));
@@ -344,13 +341,13 @@ class TileTracer {
                     continue;
                 }
                 bool fetched = false;
-                const auto test = [&](int64_t c, int64_t r, bool inside) {
+                const auto test = [&](int64_t c, int64_t r) {
                     if (double(near[k]) > depth_bound_[c + r * kStride]) return;
-                    if (!fetched && !inside) scene_.prefetch_points(triangle), fetched = true;  // (for the kernel)
-                    try_pixel(c, r, triangle, {inside, near[k], far[k]});
+                    if (!fetched) scene_.prefetch_points(triangle), fetched = true;  // (for the kernel)
+                    try_pixel(c, r, triangle, near[k], far[k]);
                 };
-                if (on_first >> k & 1) test(rect[0][k], rect[2][k], first_in >> k & 1);
-                if (on_last >> k & 1) test(rect[1][k], rect[3][k], last_in >> k & 1);
+                if (on_first >> k & 1) test(rect[0][k], rect[2][k]);
+                if (on_last >> k & 1) test(rect[1][k], rect[3][k]);
             }
         }
 #else
@@ -379,23 +376,15 @@ class TileTracer {
                     scene_.prefetch_points(i);  // for the kernel, while the footprint is set up
                     footprint.emplace(projected_.footprint(i));
                 }
-                const Footprint::Cover cover = footprint->cover_at(i0_ + c, r0_ + r);
-                if (cover != Footprint::kNone)
-                    try_pixel(c, r, i, {sure_allowed_ && cover == Footprint::kInside, float(rect.near), float(rect.far)});
+                if (footprint->may_cover(i0_ + c, r0_ + r)) try_pixel(c, r, i, float(rect.near), float(rect.far));
             }
     }
 
-    /// What a candidate triangle claims of a pixel: whether its footprint surely covers the
-    /// pixel's centre (Footprint::kInside, and sure hits allowed), and bounds on its depths.
-    struct Claim {
-        bool inside = false;
-        float near = -HUGE_VALF, far = HUGE_VALF;
-    };
-
-    /// Tests triangle i on the block's ray at column c, row r; on a closer hit, the depth
-    /// bounds of the ray and of its quad follow.
-    void try_pixel(int64_t c, int64_t r, uint32_t i, Claim claim = {}) {
-        if (!test_pixel(c, r, i, claim)) return;
+    /// Tests triangle i, whose depths lie within [near, far] (when known), on the block's
+    /// ray at column c, row r; on a closer hit, the depth bounds of the ray and of its quad
+    /// follow.
+    void try_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF) {
+        if (!test_pixel(c, r, i, near, far)) return;
         const int64_t q = 2 * (c >> 1) + 2 * (r >> 1) * kStride;  // the quad's first pixel
         quad_[(c >> 1) + (r >> 1) * kQuads] = std::max(std::max(depth_bound_[q], depth_bound_[q + 1]),
                                                        std::max(depth_bound_[q + kStride], depth_bound_[q + kStride + 1]));
@@ -404,26 +393,23 @@ class TileTracer {
     /// Tests triangle i on the block's ray at column c, row r; on a closer hit, the ray's
     /// depth bound follows and this returns true.
     ///
-    /// A sure hit settles a pixel without its ray when only triangle ids are asked for: the
-    /// first candidate of a pixel whose footprint surely covers its centre, in double with
-    /// the watertight kernel, is recorded with its depth bounds and no kernel call. Why
-    /// that is the kernel's answer: its centre lies inside every edge by more than the
-    /// slack, so (Footprint's argument, reversed) the exact ray passes strictly inside the
-    /// exact triangle, and the kernel's edge functions take their exact signs (its
-    /// exact_if_close), so it hits, within the t range (ProjectedScene::sure). A later
-    /// candidate is culled when its nearest depth lies beyond the sure hit's farthest: each
-    /// bound clears the exact depths by the depth slack plus 2^-21 relative, far beyond the
-    /// kernel's rounding of t and its tie tolerance, so the kernel would rank it behind.
-    /// Any other candidate makes the ray, and the kernel tests the sure hit, then it.
-    bool test_pixel(int64_t c, int64_t r, uint32_t i, Claim claim = {}) {
+    /// A sure hit settles a pixel without its ray when only triangle ids are asked for (and
+    /// the kernel is the watertight one in double, without culling): the pixel's first
+    /// candidate, when the kernel surely hits it (ProjectedScene::surely_hit), is recorded
+    /// with its depth bounds, and no ray is made. A later candidate is culled when its
+    /// nearest depth lies beyond the sure hit's farthest: each bound clears the exact depths
+    /// by the depth slack plus 2^-21 relative, far beyond the kernel's rounding of t and its
+    /// tie tolerance, so the kernel would rank it behind. Any other candidate makes the ray,
+    /// and the kernel tests the sure hit, then it: the kernel decides every close call.
+    bool test_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF) {
         const int64_t j = c + r * kStride;
         const uint64_t bit = uint64_t(1) << c;
         bool settled = false;  // a sure hit was just tested with the kernel
         if (!(made_[r] & bit)) {
-            if (!(sure_bits_[r] & bit) && claim.inside && projected_.sure(claim.near, claim.far)) {
+            if (sure_allowed_ && !(sure_bits_[r] & bit) && projected_.surely_hit(i, i0_ + c, r0_ + r, near, far)) {
                 sure_bits_[r] |= bit;
                 sure_[j] = i;
-                depth_bound_[j] = double(claim.far);
+                depth_bound_[j] = double(far);
                 return true;
             }
             make_ray(j);
