@@ -11,6 +11,10 @@ Only the cast's worker threads are counted (they run ``vrc::render``; the core k
 symbols for this), which includes the per-camera projection and binning. Prints
 instructions per ray, and with ``--functions N`` the N functions that executed the most
 (callgrind_annotate's self counts: where the instructions go).
+
+valgrind 3.19 cannot run AVX-512 code: on such a machine, count a build made without it
+(``pip install --no-build-isolation --no-deps . --target /tmp/cg
+-Ccmake.define.CMAKE_CXX_FLAGS=-mno-avx512f``, then ``PYTHONPATH=/tmp/cg python ...``).
 """
 
 from __future__ import annotations
