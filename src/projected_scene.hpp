@@ -280,6 +280,30 @@ class ProjectedScene {
         const float* p[3] = {(*this)[tri[0]], (*this)[tri[1]], (*this)[tri[2]]};
         if (p[0][3] + p[1][3] + p[2][3] != 0) return false;  // a point with no usable projection
         const double x = double(col), y = double(row);
+#if defined(__AVX2__)
+        // The three edges in lanes 0 to 2 (lane 3 repeats lane 2), the same operations.
+        const auto lanes = [](double a, double b, double c) { return _mm256_setr_pd(a, b, c, c); };
+        const __m256d ax = lanes(p[0][0], p[1][0], p[2][0]), ay = lanes(p[0][1], p[1][1], p[2][1]);
+        const __m256d bx = lanes(p[1][0], p[2][0], p[0][0]), by = lanes(p[1][1], p[2][1], p[0][1]);
+        const __m256d abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(INT64_MAX));
+        const auto abs = [&](__m256d v) { return _mm256_and_pd(v, abs_mask); };
+        const __m256d big = _mm256_max_pd(abs(ax), abs(ay));
+        const __m128d half = _mm_max_pd(_mm256_castpd256_pd128(big), _mm256_extractf128_pd(big, 1));
+        const double size = std::max(_mm_cvtsd_f64(half), _mm_cvtsd_f64(_mm_unpackhi_pd(half, half)));
+        const __m256d m = _mm256_set1_pd(projection_margin_ + 0x1p-23 * size), X = _mm256_set1_pd(x), Y = _mm256_set1_pd(y);
+        const __m256d ex = _mm256_sub_pd(bx, ax), ey = _mm256_sub_pd(by, ay), dx = _mm256_sub_pd(X, ax), dy = _mm256_sub_pd(Y, ay);
+        const __m256d e = _mm256_sub_pd(_mm256_mul_pd(ex, dy), _mm256_mul_pd(ey, dx));
+        const __m256d from_a = _mm256_add_pd(abs(dx), abs(dy));
+        const __m256d from_b = _mm256_add_pd(abs(_mm256_sub_pd(X, bx)), abs(_mm256_sub_pd(Y, by)));
+        const __m256d edge = _mm256_add_pd(abs(ex), abs(ey));
+        __m256d bound = _mm256_mul_pd(m, _mm256_add_pd(edge, _mm256_mul_pd(_mm256_set1_pd(2), _mm256_min_pd(from_a, from_b))));
+        bound = _mm256_add_pd(bound, _mm256_mul_pd(_mm256_set1_pd(4), _mm256_mul_pd(m, m)));
+        bound = _mm256_add_pd(bound, _mm256_mul_pd(_mm256_set1_pd(0x1p-48), _mm256_mul_pd(edge, from_a)));
+        bound = _mm256_add_pd(_mm256_mul_pd(bound, _mm256_set1_pd(1 + 0x1p-40)), _mm256_set1_pd(0x1p-1000));
+        const int below = _mm256_movemask_pd(_mm256_cmp_pd(e, _mm256_xor_pd(bound, _mm256_set1_pd(-0.0)), _CMP_LT_OQ));
+        const int above = _mm256_movemask_pd(_mm256_cmp_pd(e, bound, _CMP_GT_OQ));
+        return below == 15 || above == 15;
+#else
         double size = 0;
         for (int k = 0; k < 3; ++k) size = std::max(size, std::max(std::fabs(double(p[k][0])), std::fabs(double(p[k][1]))));
         const double m = projection_margin_ + 0x1p-23 * size;
@@ -296,6 +320,7 @@ class ProjectedScene {
             above += e > bound;
         }
         return below == 3 || above == 3;
+#endif
     }
 
     /// Through a BVH, triangle i's rectangle (leaf order).
