@@ -74,6 +74,23 @@ def test_duplicates_and_coplanar_overlaps_go_to_the_lowest_triangle_id(strategy,
         assert (hits["triangle_id"] == 0).all()
 
 
+@pytest.mark.parametrize("gap", [0.0, 1e-12, 1e-7, 1e-3])
+def test_camera_ids_alone_decide_stacked_and_duplicate_surfaces_as_the_kernel_does(gap):
+    """A camera cast asking for ids alone settles most pixels without their rays (sure
+    hits, src/traverse_tile.hpp): surfaces stacked within the sure hit's depth bounds, or
+    duplicated, must still go to the kernel, and ties to the lowest triangle id."""
+    plane = pv.Plane(i_size=1, j_size=1, i_resolution=7, j_resolution=5).triangulate()
+    below = plane.translate((0, 0, -gap), inplace=False)
+    mesh = below.merge(plane, merge_points=False) if gap else plane.merge(plane.copy(), merge_points=False)
+    cam = vrc.Camera((0.013, 0.021, 2.0), (0.013, 0.021, 0.0), (0, 1, 0), view_angle=20, nx=61, ny=47)
+    scene = vrc.Scene(mesh)
+    ids = scene.cast(cam, arrays=["TriangleId"])["TriangleId"]
+    np.testing.assert_array_equal(ids, scene.cast(cam, arrays=["TriangleId", "Depth"])["TriangleId"])
+    upper = plane.n_cells if gap else 0  # the plane on top: the second copy, or the lower ids of two equal ones
+    hit = ids >= 0
+    assert hit.mean() > 0.5 and (ids[hit] >= upper).all() and (ids[hit] < upper + plane.n_cells).all()
+
+
 @pytest.mark.parametrize("precision", PRECISIONS)
 @pytest.mark.parametrize("strategy", STRATEGIES)
 def test_rays_parallel_to_a_face_miss_it_cleanly(strategy, precision):
