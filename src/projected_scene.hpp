@@ -274,7 +274,12 @@ class ProjectedScene {
     /// sign of det[A - O, B - O, d] for points in front). The kernel's edge functions take
     /// their exact signs (Watertight::exact_if_close), so it hits; and its t lies within the
     /// ray's range when the depths clear the camera's [near, far] (sure_near_, sure_far_).
-    [[nodiscard]] bool surely_hit(uint32_t i, int64_t col, int64_t row, float near, float far) const {
+    /// `front_only` (back-face culling): only when the edges are all positive. Columns grow
+    /// to the right and rows upwards as the eye sees them, and a central or parallel
+    /// projection keeps the orientation of points in front, so their sum, the projected
+    /// (B - A) x (C - A), is then positive: the triangle's right-hand normal points at the
+    /// eye, as the kernel's det > 0, and it is not culled.
+    [[nodiscard]] bool surely_hit(uint32_t i, int64_t col, int64_t row, float near, float far, bool front_only) const {
         if (!(near > sure_near_ && far < sure_far_)) return false;
         const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
         const float* p[3] = {(*this)[tri[0]], (*this)[tri[1]], (*this)[tri[2]]};
@@ -302,7 +307,7 @@ class ProjectedScene {
         bound = _mm256_add_pd(_mm256_mul_pd(bound, _mm256_set1_pd(1 + 0x1p-40)), _mm256_set1_pd(0x1p-1000));
         const int below = _mm256_movemask_pd(_mm256_cmp_pd(e, _mm256_xor_pd(bound, _mm256_set1_pd(-0.0)), _CMP_LT_OQ));
         const int above = _mm256_movemask_pd(_mm256_cmp_pd(e, bound, _CMP_GT_OQ));
-        return below == 15 || above == 15;
+        return above == 15 || (below == 15 && !front_only);
 #else
         double size = 0;
         for (int k = 0; k < 3; ++k) size = std::max(size, std::max(std::fabs(double(p[k][0])), std::fabs(double(p[k][1]))));
@@ -319,7 +324,7 @@ class ProjectedScene {
             below += e < -bound;
             above += e > bound;
         }
-        return below == 3 || above == 3;
+        return above == 3 || (below == 3 && !front_only);
 #endif
     }
 

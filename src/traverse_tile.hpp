@@ -52,7 +52,7 @@ class TileTracer {
     TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, const CastContext& context,
                bool ids_only)
         : scene_(scene), rays_(rays), projected_(projected), context_(context), map_(rays.pixel_map()),
-          sure_allowed_(ids_only && std::is_same_v<Kernel, Watertight<double>> && !context.cull_back_faces) {
+          sure_allowed_(ids_only && std::is_same_v<Kernel, Watertight<double>>) {
         const int64_t n = kStride * kStride;
         ray_.resize(n);
         kernel_.resize(n);
@@ -394,7 +394,7 @@ class TileTracer {
     /// depth bound follows and this returns true.
     ///
     /// A sure hit settles a pixel without its ray when only triangle ids are asked for (and
-    /// the kernel is the watertight one in double, without culling): the pixel's first
+    /// the kernel is the watertight one in double): the pixel's first
     /// candidate, when the kernel surely hits it (ProjectedScene::surely_hit), is recorded
     /// with its depth bounds, and no ray is made. A later candidate is culled when its
     /// nearest depth lies beyond the sure hit's farthest: each bound clears the exact depths
@@ -406,7 +406,7 @@ class TileTracer {
         const uint64_t bit = uint64_t(1) << c;
         bool settled = false;  // a sure hit was just tested with the kernel
         if (!(made_[r] & bit)) {
-            if (sure_allowed_ && !(sure_bits_[r] & bit) && projected_.surely_hit(i, i0_ + c, r0_ + r, near, far)) {
+            if (sure_allowed_ && !(sure_bits_[r] & bit) && projected_.surely_hit(i, i0_ + c, r0_ + r, near, far, context_.cull_back_faces)) {
                 sure_bits_[r] |= bit;
                 sure_[j] = i;
                 depth_bound_[j] = double(far);

@@ -217,6 +217,21 @@ def test_back_face_culling_keeps_front_faces_only(sphere, scene):
     assert (vrc.cast(flipped, inside, arrays=["TriangleId"], backface_culling=True)["TriangleId"] >= 0).all()
 
 
+@pytest.mark.parametrize("parallel", [False, True])
+def test_back_face_culling_of_a_lone_sheet(parallel):
+    """A sheet alone in view, from its front and from its back: asked for ids alone, most
+    pixels settle without a ray (sure hits), and a sure hit must still face the eye."""
+    sheet = pv.Plane(i_resolution=9, j_resolution=7).triangulate()  # normal +z
+    scene = vrc.Scene(sheet)
+    for side, visible in ((1.0, True), (-1.0, False)):
+        eye = (0.031, 0.017, 2.0 * side)
+        cam = vrc.Camera(eye, (0.031, 0.017, 0.0), (0, 1, 0), view_angle=30, nx=64, ny=48, parallel=parallel)
+        ids = scene.cast(cam, arrays=["TriangleId"], backface_culling=True)["TriangleId"]
+        unculled = scene.cast(cam, arrays=["TriangleId"])["TriangleId"]
+        assert (unculled >= 0).mean() > 0.5
+        np.testing.assert_array_equal(ids, unculled if visible else np.full_like(ids, -1))
+
+
 def test_progress_bar(capsys):
     scene = vrc.Scene(pv.Sphere(theta_resolution=200, phi_resolution=200))
     scene.cast(camera(nx=1200, ny=1200), arrays=["TriangleId"], progress_bar=True, threads=1)
