@@ -181,7 +181,7 @@ class ProjectedScene {
         slack_ = std::max(up(2 * depth_slack_), std::numeric_limits<float>::min());
         near_ = -up(-c.near), far_ = up(c.far);  // rounded outward
         // A triangle's depths must clear the camera's range by more than the kernel's and
-        // the ray's t range's roundings (tiny beside 2^-20) for its hit to be sure (`sure`).
+        // the ray's t range's roundings (tiny beside 2^-20) for its hit to be sure (`surely_hit`).
         sure_near_ = up(c.near + std::fabs(c.near) * 0x1p-20 + slack_);
         sure_far_ = std::isinf(c.far) ? HUGE_VALF : -up(-(c.far - std::fabs(c.far) * 0x1p-20 - slack_));
 #if defined(__SSE4_1__)
@@ -255,6 +255,7 @@ class ProjectedScene {
         return near > far_ || far < near_ ? HUGE_VALF : near;
     }
 
+#if defined(__AVX2__)
     /// Whether the watertight kernel, in double, surely hits triangle i (leaf order) on the
     /// ray of the pixel at column `col`, row `row`, within the ray's t range, given bounds
     /// [near, far] on the triangle's depths (from `triangles8`).
@@ -285,8 +286,7 @@ class ProjectedScene {
         const float* p[3] = {(*this)[tri[0]], (*this)[tri[1]], (*this)[tri[2]]};
         if (p[0][3] + p[1][3] + p[2][3] != 0) return false;  // a point with no usable projection
         const double x = double(col), y = double(row);
-#if defined(__AVX2__)
-        // The three edges in lanes 0 to 2 (lane 3 repeats lane 2), the same operations.
+        // The three edges in lanes 0 to 2 (lane 3 repeats lane 2).
         const auto lanes = [](double a, double b, double c) { return _mm256_setr_pd(a, b, c, c); };
         const __m256d ax = lanes(p[0][0], p[1][0], p[2][0]), ay = lanes(p[0][1], p[1][1], p[2][1]);
         const __m256d bx = lanes(p[1][0], p[2][0], p[0][0]), by = lanes(p[1][1], p[2][1], p[0][1]);
@@ -308,25 +308,8 @@ class ProjectedScene {
         const int below = _mm256_movemask_pd(_mm256_cmp_pd(e, _mm256_xor_pd(bound, _mm256_set1_pd(-0.0)), _CMP_LT_OQ));
         const int above = _mm256_movemask_pd(_mm256_cmp_pd(e, bound, _CMP_GT_OQ));
         return above == 15 || (below == 15 && !front_only);
-#else
-        double size = 0;
-        for (int k = 0; k < 3; ++k) size = std::max(size, std::max(std::fabs(double(p[k][0])), std::fabs(double(p[k][1]))));
-        const double m = projection_margin_ + 0x1p-23 * size;
-        int below = 0, above = 0;
-        for (int k = 0; k < 3; ++k) {
-            const float *a = p[k], *b = p[(k + 1) % 3];
-            const double ex = double(b[0]) - double(a[0]), ey = double(b[1]) - double(a[1]);
-            const double dx = x - double(a[0]), dy = y - double(a[1]);
-            const double e = ex * dy - ey * dx;
-            const double from_a = std::fabs(dx) + std::fabs(dy), from_b = std::fabs(x - double(b[0])) + std::fabs(y - double(b[1]));
-            const double edge = std::fabs(ex) + std::fabs(ey);
-            const double bound = (m * (edge + 2 * std::min(from_a, from_b)) + 4 * m * m + 0x1p-48 * edge * from_a) * (1 + 0x1p-40) + 0x1p-1000;
-            below += e < -bound;
-            above += e > bound;
-        }
-        return above == 3 || (below == 3 && !front_only);
-#endif
     }
+#endif
 
     /// Through a BVH, triangle i's rectangle (leaf order).
     [[nodiscard]] ImageRect triangle(uint32_t i) const {
@@ -377,7 +360,6 @@ class ProjectedScene {
         const __m256 lo_z = lowest(z), hi_z = highest(z);
         r.near = _mm256_sub_ps(lo_z, _mm256_add_ps(_mm256_mul_ps(_mm256_and_ps(lo_z, abs_mask), rel), slack));
         r.far = _mm256_add_ps(hi_z, _mm256_add_ps(_mm256_mul_ps(_mm256_and_ps(hi_z, abs_mask), rel), slack));
-        const __m256 far = r.far;
         const CameraSpec& c = rays_.spec();
         const __m256 zero = _mm256_setzero_ps();
         r.unknown = _mm256_cmp_ps(flag, zero, _CMP_NEQ_UQ);
@@ -393,7 +375,7 @@ class ProjectedScene {
         const __m256 empty = _mm256_or_ps(
             _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(r.c0, r.c1, _CMP_GT_OQ), _mm256_cmp_ps(r.r0, r.r1, _CMP_GT_OQ)),
                          _mm256_or_ps(_mm256_cmp_ps(r.near, _mm256_set1_ps(far_), _CMP_GT_OQ),
-                                      _mm256_cmp_ps(far, _mm256_set1_ps(near_), _CMP_LT_OQ))),
+                                      _mm256_cmp_ps(r.far, _mm256_set1_ps(near_), _CMP_LT_OQ))),
             _mm256_castsi256_ps(_mm256_xor_si256(live, _mm256_set1_epi32(-1))));
         const __m256 none = _mm256_set1_ps(float(ImageRect::kMaxPixels));
         r.c0 = _mm256_blendv_ps(r.c0, none, empty), r.c1 = _mm256_blendv_ps(r.c1, zero, empty);

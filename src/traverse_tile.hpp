@@ -52,7 +52,7 @@ class TileTracer {
     TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, const CastContext& context,
                bool ids_only)
         : scene_(scene), rays_(rays), projected_(projected), context_(context), map_(rays.pixel_map()),
-          sure_allowed_(ids_only && std::is_same_v<Kernel, Watertight<double>>) {
+          sure_allowed_(kSureHits && ids_only && std::is_same_v<Kernel, Watertight<double>>) {
         const int64_t n = kStride * kStride;
         ray_.resize(n);
         kernel_.resize(n);
@@ -404,24 +404,26 @@ class TileTracer {
     bool test_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF) {
         const int64_t j = c + r * kStride;
         const uint64_t bit = uint64_t(1) << c;
-        bool settled = false;  // a sure hit was just tested with the kernel
+        bool resolved = false;  // a sure hit was just tested with the kernel
         if (!(made_[r] & bit)) {
+#if defined(__AVX2__)
             if (sure_allowed_ && !(sure_bits_[r] & bit) && projected_.surely_hit(i, i0_ + c, r0_ + r, near, far, context_.cull_back_faces)) {
                 sure_bits_[r] |= bit;
                 sure_[j] = i;
                 depth_bound_[j] = double(far);
                 return true;
             }
+#endif
             make_ray(j);
             if (sure_bits_[r] & bit) {
                 sure_bits_[r] &= ~bit;
                 test_triangle(*kernel_[j], scene_, sure_[j], ray_[j].tmin, bound_[j], hit_[j]);
-                settled = true;
+                resolved = true;
             }
         }
         const double before = bound_[j];
         test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
-        if (bound_[j] == before && !settled) return false;
+        if (bound_[j] == before && !resolved) return false;
         depth_bound_[j] = bound_[j] * scale_[j] * (1 + 1e-12) + projected_.depth_slack();  // rounded up
         return true;
     }
@@ -446,6 +448,11 @@ class TileTracer {
     uint64_t made_[kStride];  // per row of the block, a bit for each pixel whose ray is made
     uint64_t sure_bits_[kStride];  // per row, a bit for each pixel settled by a sure hit (not made)
     bool sure_allowed_;            // see test_pixel
+#if defined(__AVX2__)
+    static constexpr bool kSureHits = true;
+#else
+    static constexpr bool kSureHits = false;  // (they come with the AVX2 leaf loop, which knows triangles' depths)
+#endif
     std::vector<uint32_t> sure_;   // the sure hit of each such pixel
     std::vector<Ray> ray_;                       // ray_, kernel_ and hit_: set for the rays made only
     std::vector<std::optional<Kernel>> kernel_;  // (optional: kernels have no default state)
