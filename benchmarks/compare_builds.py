@@ -7,7 +7,7 @@ ratios where separate runs minutes apart cannot resolve it.
     (change the core)
     pip install --no-build-isolation --no-deps . --target /tmp/after -Cbuild-dir=/tmp/build-after
     python benchmarks/compare_builds.py /tmp/before /tmp/after [--rounds 60] [--threads 2]
-        [--scene frog|bumpy|small] [--flat] [--pixels 1024]
+        [--scene frog|bumpy|small] [--flat] [--pixels 1024] [--api]
 
 Each directory holds an installed ``vtkraycast``. Each build runs in its own process (two
 builds' extensions cannot share one: their types would clash) and builds its own scene,
@@ -16,7 +16,8 @@ at this script's signal. Every build's image must equal the first's. Prints each
 median and minimum time and the median and quartiles of its time over the first build's,
 round by round. The frog scene is the contour of benchmarks/peers.py from its iso camera;
 the bumpy scene is a 330 k-triangle sphere filling the frame; the small one an 82 k-triangle
-sphere covering 1 % of it (benchmarks/skipping.py).
+sphere covering 1 % of it (benchmarks/skipping.py). The core's cast is timed alone unless
+``--api``: then the whole ``Scene.cast`` a user calls, the output image included.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 
-def caster(build: str, scene_name: str, pixels: int, threads: int, flat: bool, pipe) -> None:
+def caster(build: str, scene_name: str, pixels: int, threads: int, flat: bool, api: bool, pipe) -> None:
     """In a child process: builds the scene with `build`'s core, then casts once per
     message, answering with the time taken (and the image, for the first cast)."""
     sys.path.insert(0, build)
@@ -50,16 +51,27 @@ def caster(build: str, scene_name: str, pixels: int, threads: int, flat: bool, p
     else:  # benchmarks/skipping.py's sphere covering 1 % of the frame
         mesh = bumpy_sphere(6)
         camera = vrc.Camera((0, 0, 2.0), (0, 0, 0), (0, 1, 0), view_angle=158.3, nx=n, ny=n)
-    mesh = prepare_mesh(mesh)  # the triangulated points and triangles a Scene casts
-    core = vrc._core
-    scene = core.Scene(mesh.points, mesh.triangles, threads, not flat)
-    image = np.empty(n * n, np.int64)
-    c = camera
+    if api:
+        user_scene = vrc.Scene(mesh, threads=threads, bvh=not flat)
+
+        def cast() -> np.ndarray:
+            return np.asarray(user_scene.cast(camera, arrays=["TriangleId"], threads=threads)["TriangleId"])
+    else:
+        mesh = prepare_mesh(mesh)  # the triangulated points and triangles a Scene casts
+        core = vrc._core
+        scene = core.Scene(mesh.points, mesh.triangles, threads, not flat)
+        image = np.empty(n * n, np.int64)
+        c = camera
+
+        def cast() -> np.ndarray:
+            core.cast_camera(scene, c.frame, c.d, c.w, c.h, c.near, c.far, c.nx, c.ny, c.parallel, "auto", "bvh",
+                             False, image, None, None, threads, None)  # fmt: skip
+            return image
+
     pipe.send(None)  # ready
     while pipe.recv():
         start = time.perf_counter()
-        core.cast_camera(scene, c.frame, c.d, c.w, c.h, c.near, c.far, c.nx, c.ny, c.parallel, "auto", "bvh",
-                         False, image, None, None, threads, None)  # fmt: skip
+        image = cast()
         pipe.send((time.perf_counter() - start, image))
 
 
@@ -71,13 +83,15 @@ def main() -> None:
     parser.add_argument("--scene", choices=["frog", "bumpy", "small"], default="frog")
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")
     parser.add_argument("--pixels", type=int, default=1024)
+    parser.add_argument("--api", action="store_true", help="time Scene.cast, the output image included")
     args = parser.parse_args()
     context = multiprocessing.get_context("spawn")
     pipes, children = [], []
     for build in args.builds:
         ours, theirs = context.Pipe()
         child = context.Process(
-            target=caster, args=(str(build.resolve()), args.scene, args.pixels, args.threads, args.flat, theirs)
+            target=caster,
+            args=(str(build.resolve()), args.scene, args.pixels, args.threads, args.flat, args.api, theirs),
         )
         child.start()
         ours.recv()  # one build at a time: the scenes are not built while another casts
@@ -97,7 +111,10 @@ def main() -> None:
         pipe.send(False)
         child.join()
     n = args.pixels
-    print(f"{args.scene}{' (flat)' if args.flat else ''}, {n}x{n}, {args.threads} threads, {args.rounds} rounds")
+    print(
+        f"{args.scene}{' (flat)' if args.flat else ''}, {n}x{n}, {args.threads} threads, {args.rounds} rounds"
+        + (", Scene.cast" if args.api else "")
+    )
     for k, build in enumerate(args.builds):
         ratio = times[:, k] / times[:, 0]
         q1, median, q3 = np.percentile(ratio, [25, 50, 75])

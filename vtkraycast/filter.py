@@ -15,7 +15,7 @@ from vtkmodules.vtkCommonDataModel import vtkDataObject, vtkDataSet, vtkImageDat
 from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline
 
 from .camera import Camera, _pixels
-from .image import fill_image, image_geometry
+from .image import image_geometry
 from .scene import Scene, _precision, _strategy, _threads
 
 __all__ = ["RayCastFilter"]
@@ -205,8 +205,10 @@ class RayCastFilter(VTKPythonAlgorithmBase):
                 self._scene = Scene(data, threads=self._threads)
                 self._scene_key = key
                 self._builds += 1
-            camera, buffers = self._scene.buffers(
+            self._scene._cast_into(
+                output,
                 self._view(data),
+                world_space=self._world_space,
                 arrays=self._arrays,
                 strategy=self._strategy,
                 precision=self._precision,
@@ -215,7 +217,6 @@ class RayCastFilter(VTKPythonAlgorithmBase):
                 interpolate=self._interpolate,
                 progress=self._progress,
             )
-            fill_image(output, camera, buffers, world_space=self._world_space)
         except InterruptedError:
             output.Initialize()  # aborted on request (AbortExecuteOn): not an error
             self.SetAbortExecute(0)  # VTK leaves the flag on; the next update runs again

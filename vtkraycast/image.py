@@ -9,7 +9,7 @@ from vtkmodules.vtkCommonDataModel import vtkImageData
 
 from .camera import Camera
 
-__all__ = ["fill_image", "image_geometry"]
+__all__ = ["fill_image", "image_geometry", "set_arrays"]
 
 
 def image_geometry(camera: Camera | None, world_space: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -32,14 +32,19 @@ def image_geometry(camera: Camera | None, world_space: bool) -> tuple[np.ndarray
 def fill_image(
     image: vtkImageData, camera: Camera, buffers: dict[str, np.ndarray], *, world_space: bool = False
 ) -> vtkImageData:
-    """Sets ``image`` to ``camera``'s pixel grid and adds ``buffers`` as point arrays (shared,
-    not copied). ``Depth`` (else the first array) becomes the active scalars, which VTK's
-    image filters work on."""
+    """Sets ``image`` to ``camera``'s pixel grid and ``buffers`` as its point arrays
+    (:func:`set_arrays`)."""
     origin, spacing, direction = image_geometry(camera, world_space)
     image.SetDimensions(camera.nx, camera.ny, 1)
     image.SetOrigin(*origin)
     image.SetSpacing(*spacing)
     image.SetDirectionMatrix(*direction.ravel())
+    return set_arrays(image, buffers)
+
+
+def set_arrays(image: vtkImageData, buffers: dict[str, np.ndarray]) -> vtkImageData:
+    """Makes ``buffers`` the point arrays of ``image`` (shared, not copied). ``Depth`` (else
+    the first array) becomes the active scalars, which VTK's image filters work on."""
     point_data = image.GetPointData()
     # A pipeline reuses its output image, and vtkImageData::PrepareForNewData keeps the old
     # active scalars (to reuse their memory): without this, the previous cast's Depth
