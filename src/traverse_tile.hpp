@@ -273,10 +273,22 @@ class TileTracer {
         int top = 0;
         const ProjectedNode* node = &projected_.node(entry);
         if (!visible(packet, node->rect)) return;
+        // Leaves go through a pipeline of three: found (their triangles asked for), then
+        // their points asked for, then tested.
+        const ProjectedNode* leaves[2];
+        int queued = 0;
         for (;;) {
             if (node->count != 0) {
-                projected_.prefetch_points(node->index, node->count);
-                test_leaf(packet, node->index, node->count);
+                projected_.prefetch_triangles(*node);
+                if (queued == 2) {
+                    projected_.prefetch_points(leaves[1]->index, leaves[1]->count);
+                    test_leaf(packet, leaves[0]->index, leaves[0]->count);
+                    leaves[0] = leaves[1];
+                    leaves[1] = node;
+                } else {
+                    if (queued == 1) projected_.prefetch_points(leaves[0]->index, leaves[0]->count);
+                    leaves[queued++] = node;
+                }
             } else {
                 const ProjectedNode* left = &projected_.node(node->index);
                 projected_.prefetch(left[0]);  // (the tests' work overlaps the loads)
@@ -291,7 +303,11 @@ class TileTracer {
                 }
             }
             do {  // pop, skipping nodes now hidden behind the hits found
-                if (top == 0) return;
+                if (top == 0) {
+                    if (queued == 2) projected_.prefetch_points(leaves[1]->index, leaves[1]->count);
+                    for (int k = 0; k < queued; ++k) test_leaf(packet, leaves[k]->index, leaves[k]->count);
+                    return;
+                }
                 node = stack[--top];
             } while (!visible(packet, node->rect));
         }
