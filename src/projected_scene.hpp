@@ -568,6 +568,10 @@ class ProjectedScene {
         return {lo_z - (std::fabs(lo_z) * 0x1p-21f + slack_), hi_z + (std::fabs(hi_z) * 0x1p-21f + slack_)};
     }
 
+    /// How far down the leaf points' list framing asks for points ahead of its loads: the
+    /// next leaves' (compare_builds, frog 1024x1024, 2 threads, two processes per build:
+    /// 0.959x the time; 8, 32 and 64 ahead alike).
+    static constexpr std::ptrdiff_t kAhead = 16;
     /// Leaf i's rectangle: that of its points (each once), which holds each triangle's at
     /// a fraction of the work.
     void frame_leaf(uint32_t i) {
@@ -575,7 +579,9 @@ class ProjectedScene {
         const uint32_t *p = tree.leaf_points.data() + tree.leaf_offsets[i], *end = tree.leaf_points.data() + tree.leaf_offsets[i + 1];
 #if defined(__SSE4_1__)
         __m128 lo = _mm_set1_ps(HUGE_VALF), hi = _mm_set1_ps(-HUGE_VALF);
+        const uint32_t* list_end = tree.leaf_points.data() + tree.leaf_points.size();
         for (; p != end; ++p) {
+            if (list_end - p > kAhead) __builtin_prefetch(points_ + 4 * std::size_t(p[kAhead]));  // (the next leaves' points)
             const __m128 v = _mm_load_ps((*this)[*p]);
             lo = _mm_min_ps(lo, v);
             hi = _mm_max_ps(hi, v);
