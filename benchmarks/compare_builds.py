@@ -7,7 +7,7 @@ ratios where separate runs minutes apart cannot resolve it.
     (change the core)
     pip install --no-build-isolation --no-deps . --target /tmp/after -Cbuild-dir=/tmp/build-after
     python benchmarks/compare_builds.py /tmp/before /tmp/after [--rounds 60] [--threads 2]
-        [--scene frog|bumpy|small] [--flat] [--pixels 1024] [--api]
+        [--scene frog|bumpy|small] [--flat] [--pixels 1024] [--api] [--cold]
 
 Each directory holds an installed ``vtkraycast``. Each build runs in its own process (two
 builds' extensions cannot share one: their types would clash) and builds its own scene,
@@ -17,7 +17,9 @@ median and minimum time and the median and quartiles of its time over the first 
 round by round. The frog scene is the contour of benchmarks/peers.py from its iso camera;
 the bumpy scene is a 330 k-triangle sphere filling the frame; the small one an 82 k-triangle
 sphere covering 1 % of it (benchmarks/skipping.py). The core's cast is timed alone unless
-``--api``: then the whole ``Scene.cast`` a user calls, the output image included.
+``--api``: then the whole ``Scene.cast`` a user calls, the output image included. ``--cold``
+writes over 64 MB before each cast, as another caster run in between would (peers.py's
+alternated pairs), so the cast finds its scene out of cache.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 
-def caster(build: str, scene_name: str, pixels: int, threads: int, flat: bool, api: bool, pipe) -> None:
+def caster(build: str, scene_name: str, pixels: int, threads: int, flat: bool, api: bool, cold: bool, pipe) -> None:
     """In a child process: builds the scene with `build`'s core, then casts once per
     message, answering with the time taken (and the image, for the first cast)."""
     sys.path.insert(0, build)
@@ -68,8 +70,11 @@ def caster(build: str, scene_name: str, pixels: int, threads: int, flat: bool, a
                              False, image, None, None, threads, None)  # fmt: skip
             return image
 
+    other = np.zeros(8 << 20)  # 64 MB, beyond the last-level cache
     pipe.send(None)  # ready
     while pipe.recv():
+        if cold:
+            other += 1
         start = time.perf_counter()
         image = cast()
         pipe.send((time.perf_counter() - start, image))
@@ -84,6 +89,7 @@ def main() -> None:
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")
     parser.add_argument("--pixels", type=int, default=1024)
     parser.add_argument("--api", action="store_true", help="time Scene.cast, the output image included")
+    parser.add_argument("--cold", action="store_true", help="write over 64 MB before each cast")
     args = parser.parse_args()
     context = multiprocessing.get_context("spawn")
     pipes, children = [], []
@@ -91,7 +97,7 @@ def main() -> None:
         ours, theirs = context.Pipe()
         child = context.Process(
             target=caster,
-            args=(str(build.resolve()), args.scene, args.pixels, args.threads, args.flat, args.api, theirs),
+            args=(str(build.resolve()), args.scene, args.pixels, args.threads, args.flat, args.api, args.cold, theirs),
         )
         child.start()
         ours.recv()  # one build at a time: the scenes are not built while another casts
@@ -114,6 +120,7 @@ def main() -> None:
     print(
         f"{args.scene}{' (flat)' if args.flat else ''}, {n}x{n}, {args.threads} threads, {args.rounds} rounds"
         + (", Scene.cast" if args.api else "")
+        + (", 64 MB written over before each cast" if args.cold else "")
     )
     for k, build in enumerate(args.builds):
         ratio = times[:, k] / times[:, 0]
