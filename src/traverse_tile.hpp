@@ -281,7 +281,7 @@ class TileTracer {
         int top = 0;
         const ProjectedNode* node = &projected_.node(entry);
         if (!visible(packet, node->rect)) return;
-        const ProjectedNode* leaves[2];  // the pipeline's leaves: points asked for, then found
+        const ProjectedNode* leaves[2];  // queued: [0] its points asked for, [1] the last found
         int queued = 0;
         for (;;) {
             if (node->count != 0) {
