@@ -70,7 +70,7 @@ def caster(build: str, scene_name: str, pixels: int, threads: int, flat: bool, a
                              False, image, None, None, threads, None)  # fmt: skip
             return image
 
-    other = np.zeros(8 << 20)  # 64 MB, beyond the last-level cache
+    other = np.zeros(8 << 20) if cold else None  # 64 MB, beyond the last-level cache
     pipe.send(None)  # ready
     while pipe.recv():
         if cold:

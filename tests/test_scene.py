@@ -156,6 +156,13 @@ def test_bad_options_raise_clear_errors(scene, kwargs, error, message):
         scene.cast(camera(), **kwargs)
 
 
+def test_buffers_refuse_world_space_and_unknown_options(scene):
+    with pytest.raises(TypeError, match="world_space is an option of cast"):
+        scene.buffers(camera(), world_space=True)
+    with pytest.raises(TypeError, match="bogus"):
+        scene.buffers(camera(), bogus=1)
+
+
 def test_images_too_large_to_allocate_are_refused_before_allocation(scene):
     with pytest.raises(MemoryError, match="100000x100000 image needs about"):
         scene.cast(camera(nx=100_000, ny=100_000))

@@ -130,6 +130,8 @@ class Scene:
         (pixel ``(i, r)`` at ``i + r * nx``, row 0 at the bottom). Keyword options are those
         of :meth:`cast` but ``world_space``; :meth:`cast` wraps the arrays in an image, this
         form needs no pyvista."""
+        if "world_space" in options:
+            raise TypeError("buffers() places no image: world_space is an option of cast()")
         return self._cast_into(None, camera, **options)
 
     def cast(self, camera: Camera | Any, **options: Any) -> Any:
