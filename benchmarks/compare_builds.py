@@ -7,19 +7,21 @@ ratios where separate runs minutes apart cannot resolve it.
     (change the core)
     pip install --no-build-isolation --no-deps . --target /tmp/after -Cbuild-dir=/tmp/build-after
     python benchmarks/compare_builds.py /tmp/before /tmp/after [--rounds 60] [--threads 2]
-        [--scene frog|bumpy|small] [--flat] [--pixels 1024] [--api] [--cold]
+        [--scene frog|channels|terrain|bumpy|small] [--view framed|close|full] [--flat] [--pixels 1024]
+        [--arrays ids|geometry|default] [--cold]
 
 Each directory holds an installed ``vtkraycast``. Each build runs in its own process (two
 builds' extensions cannot share one: their types would clash) and builds its own scene,
 so builds may lay out their scenes differently; the processes cast one at a time, in turn,
 at this script's signal. Every build's image must equal the first's. Prints each build's
 median and minimum time and the median and quartiles of its time over the first build's,
-round by round. The frog scene is the contour of benchmarks/peers.py from its iso camera;
-the bumpy scene is a 330 k-triangle sphere filling the frame; the small one an 82 k-triangle
-sphere covering 1 % of it (benchmarks/skipping.py). The core's cast is timed alone unless
-``--api``: then the whole ``Scene.cast`` a user calls, the output image included. ``--cold``
-writes over 64 MB before each cast, as another caster run in between would (peers.py's
-alternated pairs), so the cast finds its scene out of cache.
+round by round. The frog, channels and terrain scenes and their views are benchmarks/scenes.py's
+(peers.py's); the bumpy scene is a 330 k-triangle sphere filling the frame; the small one an
+82 k-triangle sphere covering 1 % of it (benchmarks/skipping.py). What is timed is the whole
+``Scene.cast`` a user calls, with ``--arrays``: TriangleId alone (``ids``, the default), the
+default geometry (``geometry``: interpolate=False) or the defaults with the mesh's arrays
+(``default``). ``--cold`` writes over 64 MB before each cast, as another caster run in
+between would (peers.py's alternated pairs), so the cast finds its scene out of cache.
 """
 
 from __future__ import annotations
@@ -32,44 +34,36 @@ from pathlib import Path
 
 import numpy as np
 
+ARRAYS = {"ids": {"arrays": ["TriangleId"]}, "geometry": {"interpolate": False}, "default": {}}
 
-def caster(build: str, scene_name: str, pixels: int, threads: int, flat: bool, api: bool, cold: bool, pipe) -> None:
+
+def caster(build: str, args: argparse.Namespace, pipe) -> None:
     """In a child process: builds the scene with `build`'s core, then casts once per
     message, answering with the time taken (and the image, for the first cast)."""
     sys.path.insert(0, build)
+    sys.path.insert(1, str(Path(__file__).parent))
     import vtkraycast as vrc
-    from vtkraycast.mesh import prepare_mesh
     from vtkraycast.testing import bumpy_sphere
 
-    n = pixels
-    if scene_name == "frog":
-        from pyvista import examples
-
-        mesh = examples.load_frog_tissues().contour_labels()
-        camera = vrc.Camera.framing(mesh.bounds, view="iso", nx=n, ny=n)
-    elif scene_name == "bumpy":
+    n = args.pixels
+    if args.scene == "bumpy":
         mesh = bumpy_sphere(7)
         camera = vrc.Camera((2.2, 1.6, 1.2), (0, 0, 0), (0, 0, 1), view_angle=40, nx=n, ny=n)
-    else:  # benchmarks/skipping.py's sphere covering 1 % of the frame
+    elif args.scene == "small":  # benchmarks/skipping.py's sphere covering 1 % of the frame
         mesh = bumpy_sphere(6)
         camera = vrc.Camera((0, 0, 2.0), (0, 0, 0), (0, 1, 0), view_angle=158.3, nx=n, ny=n)
-    if api:
-        user_scene = vrc.Scene(mesh, threads=threads, bvh=not flat)
-
-        def cast() -> np.ndarray:
-            return np.asarray(user_scene.cast(camera, arrays=["TriangleId"], threads=threads)["TriangleId"])
     else:
-        mesh = prepare_mesh(mesh)  # the triangulated points and triangles a Scene casts
-        core = vrc._core
-        scene = core.Scene(mesh.points, mesh.triangles, threads, not flat)
-        image = np.empty(n * n, np.int64)
-        c = camera
+        import scenes
 
-        def cast() -> np.ndarray:
-            core.cast_camera(scene, c.frame, c.d, c.w, c.h, c.near, c.far, c.nx, c.ny, c.parallel, "auto", "bvh",
-                             False, image, None, None, threads, None)  # fmt: skip
-            return image
+        mesh = scenes.SCENES[args.scene]()
+        camera = scenes.view(mesh, args.view, n)
+    scene = vrc.Scene(mesh, threads=args.threads, bvh=not args.flat)
+    options = ARRAYS[args.arrays]
 
+    def cast() -> np.ndarray:
+        return np.asarray(scene.cast(camera, threads=args.threads, **options)["TriangleId"])
+
+    cold = args.cold
     other = np.zeros(8 << 20) if cold else None  # 64 MB, beyond the last-level cache
     pipe.send(None)  # ready
     while pipe.recv():
@@ -85,10 +79,11 @@ def main() -> None:
     parser.add_argument("builds", nargs="+", type=Path, help="directories of `pip install --target` builds")
     parser.add_argument("--rounds", type=int, default=60)
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--scene", choices=["frog", "bumpy", "small"], default="frog")
+    parser.add_argument("--scene", choices=["frog", "channels", "terrain", "bumpy", "small"], default="frog")
+    parser.add_argument("--view", choices=["framed", "close", "full"], default="framed")
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")
     parser.add_argument("--pixels", type=int, default=1024)
-    parser.add_argument("--api", action="store_true", help="time Scene.cast, the output image included")
+    parser.add_argument("--arrays", choices=list(ARRAYS), default="ids", help="what the timed Scene.cast asks for")
     parser.add_argument("--cold", action="store_true", help="write over 64 MB before each cast")
     args = parser.parse_args()
     context = multiprocessing.get_context("spawn")
@@ -97,7 +92,7 @@ def main() -> None:
         ours, theirs = context.Pipe()
         child = context.Process(
             target=caster,
-            args=(str(build.resolve()), args.scene, args.pixels, args.threads, args.flat, args.api, args.cold, theirs),
+            args=(str(build.resolve()), args, theirs),
         )
         child.start()
         ours.recv()  # one build at a time: the scenes are not built while another casts
@@ -118,9 +113,8 @@ def main() -> None:
         child.join()
     n = args.pixels
     print(
-        f"{args.scene}{' (flat)' if args.flat else ''}, {n}x{n}, {args.threads} threads, {args.rounds} rounds"
-        + (", Scene.cast" if args.api else "")
-        + (", 64 MB written over before each cast" if args.cold else "")
+        f"{args.scene} ({args.view}){' (flat)' if args.flat else ''}, {n}x{n}, {args.threads} threads, "
+        f"{args.rounds} rounds, arrays: {args.arrays}" + (", 64 MB written over before each cast" if args.cold else "")
     )
     for k, build in enumerate(args.builds):
         ratio = times[:, k] / times[:, 0]

@@ -28,10 +28,6 @@ namespace {
 using Points = nb::ndarray<const double, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
 using Triangles = nb::ndarray<const uint32_t, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
 using IdsOut = nb::ndarray<int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
-template <class Real>
-using ValuesOut = nb::ndarray<Real, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
-template <class Real>
-using TriplesOut = nb::ndarray<Real, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
 
 unsigned resolve_threads(int threads) {
     if (threads < 0) throw std::invalid_argument("threads must be >= 1 (or None for all cores)");
@@ -102,84 +98,173 @@ bool dispatch(const vrc::Scene& scene, const Rays& rays, Strategy strategy, bool
     throw std::logic_error("unhandled strategy");
 }
 
+using AnyArray = nb::ndarray<nb::c_contig, nb::device::cpu>;
+using ConstAnyArray = nb::ndarray<nb::ro, nb::c_contig, nb::device::cpu>;
+using Frame = nb::ndarray<const double, nb::shape<4, 3>, nb::c_contig, nb::device::cpu>;
+using MaskOut = nb::ndarray<uint8_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using CellMap = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+
+/// A mesh array to gather at the hits, and the output array it goes to (Field).
+struct FieldRequest {
+    ConstAnyArray values;
+    AnyArray out;
+    bool per_point;
+};
+
+/// One cast: what to cast (a camera, or arrays of rays), the options, the output arrays
+/// (unset: not asked for) and the mesh's data the per-hit values come from. Python fills
+/// it field by field, so new options do not lengthen a call.
+struct Request {
+    std::optional<Frame> frame;  ///< camera: rows eye, right, up, backward
+    double d = 1, width = 1, height = 1, near = 0, far = HUGE_VAL;
+    int64_t nx = 1, ny = 1;
+    bool parallel = false;
+    std::optional<Points> origins, directions;  ///< arrays of rays, instead of a camera
+    double tmin = 0, tmax = HUGE_VAL;
+    std::string strategy = "auto", accel = "bvh", precision = "float64";
+    bool backface_culling = false;
+    int threads = 0;
+    std::optional<nb::callable> progress;
+    std::optional<IdsOut> triangle_id, cell_id;
+    std::optional<MaskOut> valid;
+    std::optional<AnyArray> depth, barycentric, position, normal;
+    std::optional<Triangles> mesh_triangles;
+    std::optional<CellMap> cell_ids, surface_cell_ids;
+    std::vector<FieldRequest> fields;
+};
+
+vrc::Dtype dtype_of(const nb::dlpack::dtype& t) {
+    using Code = nb::dlpack::dtype_code;
+    const auto is = [&](Code code, int bits) { return t.code == uint8_t(code) && t.bits == bits && t.lanes == 1; };
+    if (is(Code::Int, 8)) return vrc::Dtype::i8;
+    if (is(Code::UInt, 8)) return vrc::Dtype::u8;
+    if (is(Code::Int, 16)) return vrc::Dtype::i16;
+    if (is(Code::UInt, 16)) return vrc::Dtype::u16;
+    if (is(Code::Int, 32)) return vrc::Dtype::i32;
+    if (is(Code::UInt, 32)) return vrc::Dtype::u32;
+    if (is(Code::Int, 64)) return vrc::Dtype::i64;
+    if (is(Code::UInt, 64)) return vrc::Dtype::u64;
+    if (is(Code::Float, 32)) return vrc::Dtype::f32;
+    if (is(Code::Float, 64)) return vrc::Dtype::f64;
+    throw std::invalid_argument("mesh arrays must be of an integer or floating type");
+}
+
+/// Elements per row of an array with `rows` rows (the product of its other dimensions).
+template <class Array>
+std::size_t row_size(const Array& a, std::size_t rows, const char* name) {
+    if (a.ndim() == 0 || a.shape(0) != rows)
+        throw std::invalid_argument(std::string(name) + " must have one row per " + (rows ? "element" : "ray"));
+    std::size_t size = 1;
+    for (std::size_t k = 1; k < a.ndim(); ++k) size *= a.shape(k);
+    return size;
+}
+
+/// A Real output array of `n` rows of `width` elements, or null when not asked for.
+template <class Real>
+Real* real_out(const std::optional<AnyArray>& a, std::size_t n, std::size_t width, const char* name) {
+    if (!a) return nullptr;
+    if (a->dtype() != nb::dtype<Real>() || row_size(*a, n, name) != width)
+        throw std::invalid_argument(std::string(name) + " must be a (rays, " + std::to_string(width) +
+                                    ") array of the cast's precision");
+    return static_cast<Real*>(a->data());
+}
+
+/// The request's outputs and mesh data for `n` rays, checked against each other and the scene.
+template <class Real>
+vrc::Outputs<Real> outputs(const vrc::Scene& scene, const Request& q, std::size_t n) {
+    vrc::Outputs<Real> out;
+    const auto ids = [&](const std::optional<IdsOut>& a, const char* name) -> int64_t* {
+        if (!a) return nullptr;
+        if (a->shape(0) != n) throw std::invalid_argument(std::string(name) + " must have one row per ray");
+        return a->data();
+    };
+    out.triangle_id = ids(q.triangle_id, "triangle_id");
+    out.cell_id = ids(q.cell_id, "cell_id");
+    if (q.valid) {
+        if (q.valid->shape(0) != n) throw std::invalid_argument("valid must have one row per ray");
+        out.valid = q.valid->data();
+    }
+    out.depth = real_out<Real>(q.depth, n, 1, "depth");
+    out.barycentric = real_out<Real>(q.barycentric, n, 3, "barycentric");
+    out.position = real_out<Real>(q.position, n, 3, "position");
+    out.normal = real_out<Real>(q.normal, n, 3, "normal");
+    const std::size_t n_tri = scene.n_triangles();
+    const auto per_triangle = [&](const std::optional<CellMap>& a, const char* name) -> const int64_t* {
+        if (!a || a->shape(0) != n_tri) throw std::invalid_argument(std::string(name) + " must have one row per triangle");
+        return a->data();
+    };
+    if (out.cell_id) out.cell_ids = per_triangle(q.cell_ids, "cell_ids");
+    for (const FieldRequest& f : q.fields) {
+        const vrc::Dtype type = dtype_of(f.values.dtype());
+        if (f.out.dtype() != f.values.dtype()) throw std::invalid_argument("a field's output must be of its input's type");
+        const std::size_t components = row_size(f.out, n, "a field's output");
+        if (f.per_point) {
+            if (!q.mesh_triangles || q.mesh_triangles->shape(0) != n_tri)
+                throw std::invalid_argument("point fields need the mesh's triangles");
+            out.mesh_triangles = q.mesh_triangles->data();
+            if (row_size(f.values, scene.input_points, "a point field") != components)
+                throw std::invalid_argument("a point field's output must have as many components as the field");
+        } else {
+            out.surface_cell_ids = per_triangle(q.surface_cell_ids, "surface_cell_ids");
+            if (f.values.ndim() == 0 || row_size(f.values, f.values.shape(0), "a cell field") != components)
+                throw std::invalid_argument("a cell field's output must have as many components as the field");
+        }
+        out.fields.push_back({f.values.data(), f.out.data(), type, uint32_t(components), f.per_point});
+    }
+    return out;
+}
+
+/// The camera rays of a request, restricted to what may see the scene.
+vrc::CameraRays camera_rays(const vrc::Scene& scene, const Request& q) {
+    vrc::CameraSpec spec{};
+    for (int k = 0; k < 3; ++k) {
+        spec.eye[k] = (*q.frame)(0, k);
+        spec.u[k] = (*q.frame)(1, k);
+        spec.v[k] = (*q.frame)(2, k);
+        spec.w[k] = (*q.frame)(3, k);
+    }
+    spec.d = q.d, spec.width = q.width, spec.height = q.height, spec.near = q.near, spec.far = q.far;
+    spec.nx = q.nx, spec.ny = q.ny, spec.parallel = q.parallel;
+    if (q.nx < 1 || q.ny < 1) throw std::invalid_argument("nx and ny must be >= 1");
+    if (!scene.has_bvh() && q.accel != "none" && !vrc::CameraCast::fits(spec))
+        throw std::invalid_argument("a scene built without a BVH casts images of at most " +
+                                    std::to_string(vrc::ImageRect::kMaxPixels) + " x " +
+                                    std::to_string(vrc::ImageRect::kMaxPixels) + " pixels");
+    vrc::CameraRays rays(spec);
+    rays.restrict_to(scene.bounds, scene.anchor);
+    return rays;
+}
+
 template <class Real, class Rays>
-bool run(const vrc::Scene& scene, const Rays& rays, const std::string& strategy, const std::string& accel, bool cull,
-         IdsOut triangle_id,
-         std::optional<ValuesOut<Real>> depth, std::optional<TriplesOut<Real>> barycentric, int threads,
-         std::optional<nb::callable> progress) {
-    const std::size_t n = rays.size();
-    if (triangle_id.shape(0) != n || (depth && depth->shape(0) != n) || (barycentric && barycentric->shape(0) != n))
-        throw std::invalid_argument("output arrays must have one row per ray");
-    const vrc::Outputs<Real> out{triangle_id.data(), depth ? depth->data() : nullptr,
-                                 barycentric ? barycentric->data() : nullptr};
-    const Strategy s = parse_strategy(strategy);
-    const bool brute_force = parse_accel(accel);
-    const unsigned n_threads = resolve_threads(threads);
-    PythonPoll poll{std::move(progress)};
+bool run(const vrc::Scene& scene, const Rays& rays, const Request& q) {
+    const vrc::Outputs<Real> out = outputs<Real>(scene, q, rays.size());
+    const Strategy s = parse_strategy(q.strategy);
+    const bool brute_force = parse_accel(q.accel);
+    const unsigned n_threads = resolve_threads(q.threads);
+    PythonPoll poll{q.progress};
     bool completed;
     {
         nb::gil_scoped_release release;
-        completed = dispatch<Real>(scene, rays, s, brute_force, out, cull, n_threads, std::ref(poll));
+        completed = dispatch<Real>(scene, rays, s, brute_force, out, q.backface_culling, n_threads, std::ref(poll));
     }
     if (poll.raised) throw nb::python_error();
     return completed;
 }
 
 template <class Real>
-void bind_precision(nb::module_& m) {
-    m.def(
-        "cast_camera",
-        [](const vrc::Scene& scene, nb::ndarray<const double, nb::shape<4, 3>, nb::c_contig> frame, double d,
-           double width, double height, double near, double far, int64_t nx, int64_t ny, bool parallel,
-           const std::string& strategy, const std::string& accel, bool backface_culling, IdsOut triangle_id,
-           std::optional<ValuesOut<Real>> depth, std::optional<TriplesOut<Real>> barycentric, int threads,
-           std::optional<nb::callable> progress) {
-            vrc::CameraSpec spec{};
-            for (int k = 0; k < 3; ++k) {
-                spec.eye[k] = frame(0, k);
-                spec.u[k] = frame(1, k);
-                spec.v[k] = frame(2, k);
-                spec.w[k] = frame(3, k);
-            }
-            spec.d = d;
-            spec.width = width;
-            spec.height = height;
-            spec.near = near;
-            spec.far = far;
-            spec.nx = nx;
-            spec.ny = ny;
-            spec.parallel = parallel;
-            if (!scene.has_bvh() && accel != "none" && !vrc::CameraCast::fits(spec))
-                throw std::invalid_argument("a scene built without a BVH casts images of at most " +
-                                            std::to_string(vrc::ImageRect::kMaxPixels) + " x " +
-                                            std::to_string(vrc::ImageRect::kMaxPixels) + " pixels");
-            vrc::CameraRays rays(spec);
-            rays.restrict_to(scene.bounds, scene.anchor);
-            return run<Real>(scene, rays, strategy, accel, backface_culling, triangle_id, depth, barycentric,
-                             threads, std::move(progress));
-        },
-        "scene"_a, "frame"_a, "d"_a, "width"_a, "height"_a, "near"_a, "far"_a, "nx"_a, "ny"_a, "parallel"_a,
-        "strategy"_a, "accel"_a, "backface_culling"_a, "triangle_id"_a, "depth"_a.none(), "barycentric"_a.none(), "threads"_a,
-        "progress"_a.none(),
-        "Casts one ray per pixel of a camera (frame rows: eye, right, up, backward). Returns False if aborted.");
-    m.def(
-        "cast_rays",
-        [](const vrc::Scene& scene, Points origins, Points directions, double tmin, double tmax,
-           const std::string& strategy, const std::string& accel, bool backface_culling, IdsOut triangle_id,
-           std::optional<ValuesOut<Real>> t,
-           std::optional<TriplesOut<Real>> barycentric, int threads, std::optional<nb::callable> progress) {
-            if (origins.shape(0) != directions.shape(0))
-                throw std::invalid_argument("origins and directions must have the same number of rows");
-            if (!scene.has_bvh() && accel != "none")
-                throw std::invalid_argument("a scene built without a BVH casts camera rays only");
-            return run<Real>(scene, vrc::ArrayRays(origins.data(), directions.data(), origins.shape(0), tmin, tmax),
-                             strategy, accel, backface_culling, triangle_id, t, barycentric, threads,
-                             std::move(progress));
-        },
-        "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "strategy"_a, "accel"_a, "backface_culling"_a,
-        "triangle_id"_a, "t"_a.none(),
-        "barycentric"_a.none(), "threads"_a, "progress"_a.none(),
-        "Casts arbitrary rays ((n, 3) origins and directions). Returns False if aborted.");
+bool cast_as(const vrc::Scene& scene, const Request& q) {
+    if (q.frame) return run<Real>(scene, camera_rays(scene, q), q);
+    if (!q.origins || !q.directions) throw std::invalid_argument("a request needs a camera frame or origins and directions");
+    if (q.origins->shape(0) != q.directions->shape(0))
+        throw std::invalid_argument("origins and directions must have the same number of rows");
+    if (!scene.has_bvh() && q.accel != "none") throw std::invalid_argument("a scene built without a BVH casts camera rays only");
+    return run<Real>(scene, vrc::ArrayRays(q.origins->data(), q.directions->data(), q.origins->shape(0), q.tmin, q.tmax), q);
+}
+
+bool cast(const vrc::Scene& scene, const Request& q) {
+    if (q.precision == "float64") return cast_as<double>(scene, q);
+    if (q.precision == "float32") return cast_as<float>(scene, q);
+    throw std::invalid_argument("unknown precision '" + q.precision + "'");
 }
 
 }  // namespace
@@ -198,6 +283,7 @@ NB_MODULE(_core, m) {
                 nb::gil_scoped_release release;
                 new (self) vrc::Scene(bvh ? vrc::build_scene(points.data(), n_points, tri, n_tri, n_threads)
                                           : vrc::flat_scene(points.data(), n_points, tri, n_tri));
+                self->input_points = n_points;
             },
             "points"_a, "triangles"_a, "threads"_a, "bvh"_a = true,
             "Copies the (n, 3) float64 points and (m, 3) uint32 triangles and builds the BVH (with bvh=False none: "
@@ -209,6 +295,44 @@ NB_MODULE(_core, m) {
         .def_prop_ro("memory_bytes", &vrc::Scene::memory_bytes,
                      "Bytes held by the BVH, the triangles, the points and the memory kept for camera casts.");
     m.attr("max_binned_pixels") = vrc::ImageRect::kMaxPixels;  // widest image a scene without a BVH casts
-    bind_precision<double>(m);
-    bind_precision<float>(m);
+    nb::class_<Request>(m, "Request", "One cast's rays, options, output arrays and mesh data (fields left unset: not asked for).")
+        .def(nb::init<>())
+        .def_rw("frame", &Request::frame, nb::arg().none())
+        .def_rw("d", &Request::d)
+        .def_rw("width", &Request::width)
+        .def_rw("height", &Request::height)
+        .def_rw("near", &Request::near)
+        .def_rw("far", &Request::far)
+        .def_rw("nx", &Request::nx)
+        .def_rw("ny", &Request::ny)
+        .def_rw("parallel", &Request::parallel)
+        .def_rw("origins", &Request::origins, nb::arg().none())
+        .def_rw("directions", &Request::directions, nb::arg().none())
+        .def_rw("tmin", &Request::tmin)
+        .def_rw("tmax", &Request::tmax)
+        .def_rw("strategy", &Request::strategy)
+        .def_rw("accel", &Request::accel)
+        .def_rw("precision", &Request::precision)
+        .def_rw("backface_culling", &Request::backface_culling)
+        .def_rw("threads", &Request::threads)
+        .def_rw("progress", &Request::progress, nb::arg().none())
+        .def_rw("triangle_id", &Request::triangle_id, nb::arg().none())
+        .def_rw("cell_id", &Request::cell_id, nb::arg().none())
+        .def_rw("valid", &Request::valid, nb::arg().none())
+        .def_rw("depth", &Request::depth, nb::arg().none())
+        .def_rw("barycentric", &Request::barycentric, nb::arg().none())
+        .def_rw("position", &Request::position, nb::arg().none())
+        .def_rw("normal", &Request::normal, nb::arg().none())
+        .def_rw("mesh_triangles", &Request::mesh_triangles, nb::arg().none())
+        .def_rw("cell_ids", &Request::cell_ids, nb::arg().none())
+        .def_rw("surface_cell_ids", &Request::surface_cell_ids, nb::arg().none())
+        .def(
+            "add_field",
+            [](Request& q, ConstAnyArray values, AnyArray out, bool per_point) {
+                q.fields.push_back({std::move(values), std::move(out), per_point});
+            },
+            "values"_a, "out"_a, "per_point"_a,
+            "Gathers a mesh array at the hits into `out`: a point array interpolated, a cell array by the hit cell.");
+    m.def("cast", &cast, "scene"_a, "request"_a,
+          "Casts a request's rays (released GIL, all outputs written by the workers). Returns False if aborted.");
 }

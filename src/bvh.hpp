@@ -52,6 +52,7 @@ struct Scene {
     std::vector<double> points;       ///< (n_points, 3) world coordinates, in order of first use
     std::vector<uint32_t> triangles;  ///< (n_triangles, 3) point indices, in leaf order
     std::vector<uint32_t> prim_ids;   ///< leaf-order position -> input triangle index
+    std::size_t input_points = 0;     ///< points of the input mesh (point fields have a row each)
     std::vector<Node> nodes;          ///< nodes[0] is the root; empty when there are no triangles
     CameraTree camera;                ///< the hierarchy as camera casts go through it
     /// Boxes are stored relative to this point (the centre of the triangles' bounding box), so

@@ -18,57 +18,10 @@
 
 #include "traverse.hpp"
 #include "bin_triangles.hpp"
+#include "outputs.hpp"
 #include "traverse_tile.hpp"
 
 namespace vrc {
-
-/// Caller-owned output arrays, one element (three for barycentrics) per ray. Only
-/// `triangle_id` is required; a null pointer means "not asked for" and is not written.
-template <class Real>
-struct Outputs {
-    int64_t* triangle_id;  ///< input triangle index, -1 on a miss
-    Real* depth;           ///< camera depth (or t for array rays), NaN on a miss
-    Real* barycentric;     ///< (n, 3) weights of the triangle's points, NaN on a miss
-};
-
-/// Writes closest hits into the outputs: a ray at a time, or a run of misses at once
-/// (most of a sparse frame: filled, not stored pixel by pixel).
-template <class Real>
-class OutputWriter {
-    static constexpr Real kNaN = std::numeric_limits<Real>::quiet_NaN();
-
-   public:
-    OutputWriter(const Scene& scene, const Outputs<Real>& out) : scene_(scene), out_(out) {}
-    /// Ray k's closest hit (or a miss when none is found); `ray` is read on hits only.
-    void operator()(std::size_t k, const Ray& ray, const Hit<Real>& hit) const {
-        const bool found = hit.found();
-        out_.triangle_id[k] = found ? int64_t(scene_.prim_ids[hit.prim]) : -1;
-        if (out_.depth) out_.depth[k] = found ? static_cast<Real>(ray.output(hit.t)) : kNaN;
-        if (out_.barycentric)
-            for (int c = 0; c < 3; ++c) out_.barycentric[3 * k + c] = found ? hit.b[c] : kNaN;
-    }
-    /// Asks the cache for what storing `hit` reads (its input triangle index: scattered,
-    /// mostly a miss).
-    void prefetch(const Hit<Real>& hit) const {
-        if (hit.found()) __builtin_prefetch(scene_.prim_ids.data() + hit.prim);
-    }
-    /// Whether only triangle ids are asked for (then a tile may settle a pixel without its
-    /// exact depth: TileTracer::test_pixel's sure hits).
-    [[nodiscard]] bool ids_only() const { return !out_.depth && !out_.barycentric; }
-    /// Ray k's hit is triangle `prim` (leaf order), and only its id is asked for.
-    void id(std::size_t k, uint32_t prim) const { out_.triangle_id[k] = int64_t(scene_.prim_ids[prim]); }
-    void prefetch_id(uint32_t prim) const { __builtin_prefetch(scene_.prim_ids.data() + prim); }
-    /// Misses for rays k to k + n - 1.
-    void misses(std::size_t k, std::size_t n) const {
-        std::fill_n(out_.triangle_id + k, n, int64_t(-1));
-        if (out_.depth) std::fill_n(out_.depth + k, n, kNaN);
-        if (out_.barycentric) std::fill_n(out_.barycentric + 3 * k, 3 * n, kNaN);
-    }
-
-   private:
-    const Scene& scene_;
-    const Outputs<Real>& out_;
-};
 
 /// Called from the calling thread with (tiles done, tiles total) as the cast starts, then
 /// about every 50 ms; returning false aborts the cast between tiles.
@@ -192,7 +145,7 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         if constexpr (kTiles) {
             if (camera) {
                 const std::vector<uint32_t> unknown = camera->prepare(w, n_workers, rays);
-                TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context, store.ids_only());
+                TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context, !out.needs_hit_point());
                 for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
                     if (camera->bins && rays.tile_may_hit(tile))
                         tracer.trace_bin(tile, *camera->bins, unknown, store);

@@ -48,11 +48,12 @@ class TileTracer {
     };
 
    public:
-    /// `ids_only`: the cast asks for triangle ids only, not depths or weights (see test_pixel).
+    /// `by_triangle`: the cast asks only for what the hit triangle decides, not the hit's
+    /// depth or weights (see test_pixel).
     TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, const CastContext& context,
-               bool ids_only)
+               bool by_triangle)
         : scene_(scene), rays_(rays), projected_(projected), context_(context), map_(rays.pixel_map()),
-          sure_allowed_(kSureHits && ids_only && std::is_same_v<Kernel, Watertight<double>>) {
+          sure_allowed_(kSureHits && by_triangle && std::is_same_v<Kernel, Watertight<double>>) {
         const int64_t n = kStride * kStride;
         ray_.resize(n);
         kernel_.resize(n);
@@ -72,8 +73,9 @@ class TileTracer {
     static_assert(kStride <= 64, "a row's made rays are the bits of one word");
 
     /// Traces the tile's rays as one packet and writes each pixel's hit with `store`
-    /// (store(pixel, ray, hit) for a ray made, store.misses(pixel, n) for a run of misses;
-    /// store.prefetch(hit) first, for all the hits of the tile).
+    /// (store(pixel, ray, hit) for a ray made, store.settled(pixel, triangle) for a sure
+    /// hit, store.misses(pixel, n) for a run of misses; store.prefetch(triangle) first, for
+    /// all the hits of the tile).
     template <class Store>
     void trace(std::size_t tile, Store&& store) {
         const CameraRays::TilePixels t = rays_.tile_pixels(tile);
@@ -167,24 +169,35 @@ class TileTracer {
         return q.c0 <= p.i1 && q.c1 >= p.i0 && q.r0 <= p.r1 && q.r1 >= p.r0;
     }
 
-    /// Stores the block's rows as misses, then the hits of the rays made and the sure hits.
+    /// Stores the block's rows: its hits (rays made, sure hits) and the runs of misses
+    /// between them, each pixel written once.
     template <class Store>
     void finish(Store& store) {
+        uint64_t hits[kStride];
         for (int64_t r = 0; r < height_; ++r) {
-            for (uint64_t m = made_[r]; m != 0; m &= m - 1) store.prefetch(hit_[__builtin_ctzll(m) + r * kStride]);
-            for (uint64_t m = sure_bits_[r]; m != 0; m &= m - 1) store.prefetch_id(sure_[__builtin_ctzll(m) + r * kStride]);
-        }
-        for (int64_t r = 0; r < height_; ++r) {
-            store.misses(pixel(r * kStride), std::size_t(width_));
+            hits[r] = sure_bits_[r];
             for (uint64_t m = made_[r]; m != 0; m &= m - 1) {
                 const int64_t j = __builtin_ctzll(m) + r * kStride;
-                if (hit_[j].found()) store(pixel(j), ray_[j], hit_[j]);
+                if (hit_[j].found()) hits[r] |= uint64_t(1) << (j % kStride), store.prefetch(hit_[j].prim);
             }
-            for (uint64_t m = sure_bits_[r]; m != 0; m &= m - 1) {
-                const int64_t j = __builtin_ctzll(m) + r * kStride;
-                store.id(pixel(j), sure_[j]);
-            }
+            for (uint64_t m = sure_bits_[r]; m != 0; m &= m - 1) store.prefetch(sure_[__builtin_ctzll(m) + r * kStride]);
         }
+        for (int64_t r = 0; r < height_; ++r)
+            for (int64_t c = 0; c < width_;) {
+                const int64_t j = c + r * kStride;
+                const uint64_t ahead = hits[r] >> c;
+                if (!(ahead & 1)) {  // a run of misses up to the next hit (or the row's end)
+                    const int64_t run = ahead ? std::min<int64_t>(__builtin_ctzll(ahead), width_ - c) : width_ - c;
+                    store.misses(pixel(j), std::size_t(run));
+                    c += run;
+                    continue;
+                }
+                if (sure_bits_[r] >> c & 1)
+                    store.settled(pixel(j), sure_[j]);
+                else
+                    store(pixel(j), ray_[j], hit_[j]);
+                ++c;
+            }
     }
 
     /// The image pixel of the block's ray j (column j % kStride, row j / kStride).

@@ -1,0 +1,181 @@
+// The geometry buffer a cast writes: every output array, each hit's values assembled by
+// the worker that found it, straight into caller-owned arrays (misses in the same pass).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <type_traits>
+#include <vector>
+
+#include "bvh.hpp"
+#include "geometry.hpp"
+
+namespace vrc {
+
+/// Element types of the mesh arrays a cast gathers (VTK's numeric types).
+enum class Dtype : uint8_t { i8, u8, i16, u16, i32, u32, i64, u64, f32, f64 };
+
+/// A mesh array gathered at the hits into an output array of the same type: a point array
+/// interpolated with the hit's weights (integer arrays, labels and ids, cannot be averaged:
+/// they take the value of the point of largest weight, the first on ties), a cell array
+/// taking the value of the hit cell. Misses are NaN for floating types, 0 for integers.
+struct Field {
+    const void* values;   ///< (n_points or n_cells, components), row-major
+    void* out;            ///< (rays, components)
+    Dtype dtype;
+    uint32_t components;
+    bool per_point;
+};
+
+/// What a cast writes, each a caller-owned array with a row per ray, or null when not asked
+/// for; and the mesh's data the per-hit values come from (indexed by input triangle).
+template <class Real>
+struct Outputs {
+    int64_t* triangle_id = nullptr;  ///< input triangle index, -1 on a miss
+    int64_t* cell_id = nullptr;      ///< input cell index, -1 on a miss
+    uint8_t* valid = nullptr;        ///< 1 on a hit, 0 on a miss (vtkValidPointMask)
+    Real* depth = nullptr;           ///< camera depth (or t for array rays), NaN on a miss
+    Real* barycentric = nullptr;     ///< (n, 3) weights of the triangle's points, NaN on a miss
+    Real* position = nullptr;        ///< (n, 3) hit point, the weights applied to the points
+    Real* normal = nullptr;          ///< (n, 3) unit geometric normal (right-hand rule), NaN on a miss
+    std::vector<Field> fields;
+    const uint32_t* mesh_triangles = nullptr;    ///< (input triangles, 3) input point ids (point fields)
+    const int64_t* cell_ids = nullptr;           ///< input triangle -> input cell (CellId)
+    const int64_t* surface_cell_ids = nullptr;   ///< input triangle -> row of the cell arrays
+
+    /// Whether an output needs the hit's exact depth or weights (else a hit known by its
+    /// triangle alone is enough: TileTracer's sure hits).
+    [[nodiscard]] bool needs_hit_point() const {
+        if (depth || barycentric || position) return true;
+        return std::any_of(fields.begin(), fields.end(), [](const Field& f) { return f.per_point; });
+    }
+};
+
+/// Writes hits and misses into the outputs. Called by the workers for disjoint rays.
+template <class Real>
+class OutputWriter {
+    static constexpr Real kNaN = std::numeric_limits<Real>::quiet_NaN();
+
+   public:
+    OutputWriter(const Scene& scene, const Outputs<Real>& out) : scene_(scene), out_(out) {}
+
+    /// Ray k's closest hit (or a miss when none is found); `ray` is read on hits only.
+    void operator()(std::size_t k, const Ray& ray, const Hit<Real>& hit) const {
+        if (!hit.found()) return misses(k, 1);
+        const uint32_t input = by_triangle(k, hit.prim);
+        if (out_.depth) out_.depth[k] = static_cast<Real>(ray.output(hit.t));
+        if (out_.barycentric)
+            for (int c = 0; c < 3; ++c) out_.barycentric[3 * k + c] = hit.b[c];
+        if (out_.position) {
+            const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(hit.prim);
+            for (int a = 0; a < 3; ++a) {
+                double p = 0;
+                for (int c = 0; c < 3; ++c) p += double(hit.b[c]) * scene_.point(tri[c])[a];
+                out_.position[3 * k + a] = static_cast<Real>(p);
+            }
+        }
+        for (const Field& f : out_.fields)
+            if (f.per_point) interpolate(f, k, out_.mesh_triangles + 3 * std::size_t(input), hit.b);
+    }
+
+    /// Ray k's hit is triangle `prim` (leaf order), known without its depth or weights
+    /// (which are then not asked for: Outputs::needs_hit_point).
+    void settled(std::size_t k, uint32_t prim) const { by_triangle(k, prim); }
+
+    /// Asks the cache for what storing a hit on triangle `prim` reads first (its input
+    /// triangle index: scattered, mostly a miss).
+    void prefetch(uint32_t prim) const { __builtin_prefetch(scene_.prim_ids.data() + prim); }
+
+    /// Misses for rays k to k + n - 1.
+    void misses(std::size_t k, std::size_t n) const {
+        if (out_.triangle_id) std::fill_n(out_.triangle_id + k, n, int64_t(-1));
+        if (out_.cell_id) std::fill_n(out_.cell_id + k, n, int64_t(-1));
+        if (out_.valid) std::memset(out_.valid + k, 0, n);
+        if (out_.depth) std::fill_n(out_.depth + k, n, kNaN);
+        for (Real* triples : {out_.barycentric, out_.position, out_.normal})
+            if (triples) std::fill_n(triples + 3 * k, 3 * n, kNaN);
+        for (const Field& f : out_.fields) with_type(f.dtype, [&](auto zero) { fill_missing(f, zero, k, n); });
+    }
+
+   private:
+    /// Writes what triangle `prim` alone decides for ray k; returns its input index.
+    uint32_t by_triangle(std::size_t k, uint32_t prim) const {
+        const uint32_t input = scene_.prim_ids[prim];
+        if (out_.triangle_id) out_.triangle_id[k] = int64_t(input);
+        if (out_.cell_id) out_.cell_id[k] = out_.cell_ids[input];
+        if (out_.valid) out_.valid[k] = 1;
+        if (out_.normal) unit_normal(prim, out_.normal + 3 * k);
+        for (const Field& f : out_.fields)
+            if (!f.per_point)
+                with_type(f.dtype, [&](auto zero) { copy_row(f, zero, std::size_t(out_.surface_cell_ids[input]), k); });
+        return input;
+    }
+
+    /// Calls fn with a zero of the field's element type.
+    template <class Fn>
+    static void with_type(Dtype dtype, Fn&& fn) {
+        switch (dtype) {
+            case Dtype::i8: return fn(int8_t(0));
+            case Dtype::u8: return fn(uint8_t(0));
+            case Dtype::i16: return fn(int16_t(0));
+            case Dtype::u16: return fn(uint16_t(0));
+            case Dtype::i32: return fn(int32_t(0));
+            case Dtype::u32: return fn(uint32_t(0));
+            case Dtype::i64: return fn(int64_t(0));
+            case Dtype::u64: return fn(uint64_t(0));
+            case Dtype::f32: return fn(float(0));
+            case Dtype::f64: return fn(double(0));
+        }
+    }
+
+    template <class T>
+    static void fill_missing(const Field& f, T, std::size_t k, std::size_t n) {
+        const T missing = std::is_floating_point_v<T> ? std::numeric_limits<T>::quiet_NaN() : T(0);
+        std::fill_n(static_cast<T*>(f.out) + k * f.components, n * f.components, missing);
+    }
+
+    template <class T>
+    static void copy_row(const Field& f, T, std::size_t row, std::size_t k) {
+        const T* from = static_cast<const T*>(f.values) + row * f.components;
+        std::copy_n(from, f.components, static_cast<T*>(f.out) + k * f.components);
+    }
+
+    /// Point field f at ray k's hit on the triangle of input points `corners`, weights b.
+    static void interpolate(const Field& f, std::size_t k, const uint32_t* corners, const Real b[3]) {
+        with_type(f.dtype, [&](auto zero) {
+            using T = decltype(zero);
+            const T* values = static_cast<const T*>(f.values);
+            T* out = static_cast<T*>(f.out) + k * f.components;
+            if constexpr (std::is_floating_point_v<T>) {
+                // the weighted sum in double, in the weights' order (as numpy's reference)
+                for (uint32_t j = 0; j < f.components; ++j) {
+                    double v = 0;
+                    for (int c = 0; c < 3; ++c) v += double(b[c]) * double(values[std::size_t(corners[c]) * f.components + j]);
+                    out[j] = static_cast<T>(v);
+                }
+            } else {
+                const int c = b[1] > b[0] ? (b[2] > b[1] ? 2 : 1) : (b[2] > b[0] ? 2 : 0);
+                copy_row(f, zero, corners[c], k);
+            }
+        });
+    }
+
+    /// The unit normal of triangle `prim`: (B - A) x (C - A), normalised.
+    void unit_normal(uint32_t prim, Real* out) const {
+        const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(prim);
+        const double *a = scene_.point(tri[0]), *b = scene_.point(tri[1]), *c = scene_.point(tri[2]);
+        const double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        const double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+        const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        for (int k = 0; k < 3; ++k) out[k] = static_cast<Real>(n[k] / length);
+    }
+
+    const Scene& scene_;
+    const Outputs<Real>& out_;
+};
+
+}  // namespace vrc
