@@ -19,8 +19,9 @@ round by round. The frog, channels and terrain scenes and their views are benchm
 (peers.py's); the bumpy scene is a 330 k-triangle sphere filling the frame; the small one an
 82 k-triangle sphere covering 1 % of it (benchmarks/skipping.py). What is timed is the whole
 ``Scene.cast`` a user calls, with ``--arrays``: TriangleId alone (``ids``, the default), the
-default geometry (``geometry``: interpolate=False) or the defaults with the mesh's arrays
-(``default``). ``--cold`` writes over 64 MB before each cast, as another caster run in
+default geometry (``geometry``: interpolate=False), the defaults with the mesh's arrays
+(``default``), or the arrays named (``Depth,Elevation``). Builds are compared by the first
+array cast. ``--cold`` writes over 64 MB before each cast, as another caster run in
 between would (peers.py's alternated pairs), so the cast finds its scene out of cache.
 """
 
@@ -58,10 +59,11 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
         mesh = scenes.SCENES[args.scene]()
         camera = scenes.view(mesh, args.view, n)
     scene = vrc.Scene(mesh, threads=args.threads, bvh=not args.flat)
-    options = ARRAYS[args.arrays]
+    options = ARRAYS[args.arrays] if args.arrays in ARRAYS else {"arrays": args.arrays.split(",")}
+    compared = options.get("arrays", ["TriangleId"])[0]
 
     def cast() -> np.ndarray:
-        return np.asarray(scene.cast(camera, threads=args.threads, **options)["TriangleId"])
+        return np.asarray(scene.cast(camera, threads=args.threads, **options)[compared])
 
     cold = args.cold
     other = np.zeros(8 << 20) if cold else None  # 64 MB, beyond the last-level cache
@@ -83,7 +85,11 @@ def main() -> None:
     parser.add_argument("--view", choices=["framed", "close", "full"], default="framed")
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")
     parser.add_argument("--pixels", type=int, default=1024)
-    parser.add_argument("--arrays", choices=list(ARRAYS), default="ids", help="what the timed Scene.cast asks for")
+    parser.add_argument(
+        "--arrays",
+        default="ids",
+        help=f"what the timed Scene.cast asks for: {', '.join(ARRAYS)} or array names, comma-separated",
+    )
     parser.add_argument("--cold", action="store_true", help="write over 64 MB before each cast")
     args = parser.parse_args()
     context = multiprocessing.get_context("spawn")

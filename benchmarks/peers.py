@@ -1,13 +1,15 @@
 #!/usr/bin/env python
-"""vtkraycast against the ray casters users would otherwise pick, on the same camera rays,
-in one run: build (preparation) and cast timed separately, medians of repeats, Mrays/s, the
-ratio to vtkraycast, agreement of triangle ids, memory per triangle (resident growth over
-the build).
+"""vtkraycast against Open3D's ``RaycastingScene.cast_rays`` (Embree inside) on what users
+call: three scenes, three views each from mostly empty to full frame, the same camera rays,
+each of our casts timed in alternation with Open3D's in one run.
 
-    python benchmarks/peers.py [--pixels 1024] [--repeats 5] [--out benchmarks/results]
+    python benchmarks/peers.py [--pixels 1024] [--pairs 15] [--out benchmarks/results]
 
-The scene is the frog contour (pyvista's frog_tissues.vti, contour_labels(), 1.5 M
-triangles) from a perspective camera that frames it. Writes ``peers.md``.
+Rows per view: the defaults (``Scene.cast(camera)``: TriangleId, CellId, Barycentric, Depth,
+the valid mask and the mesh's arrays), the default geometry (``interpolate=False``: the mesh's
+arrays left out) and TriangleId alone. Open3D returns t, ids, uvs and normals in every cast.
+Also: the first image (one-shot ``vrc.cast`` against Open3D's build and first cast), bytes per
+triangle, and every other peer on the frog's framed view. Writes ``peers.md`` and ``peers.png``.
 """
 
 from __future__ import annotations
@@ -21,204 +23,180 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
-from pyvista import examples
 
 import vtkraycast as vrc
 from vtkraycast.testing import camera_rays
 
 sys.path.insert(0, str(Path(__file__).parent))
+import scenes
 from peer_casters import Open3DPeer, make_peers, more_peers
 from timing import alternated_ratio, median_seconds
 
+ROWS = {  # label -> Scene.cast options
+    "default arrays, mesh's arrays included": {},
+    "default geometry (interpolate=False)": {"interpolate": False},
+    "TriangleId alone": {"arrays": ["TriangleId"]},
+}
+TARGETS = {"default arrays, mesh's arrays included": 3.0, "TriangleId alone": 4.0}
 
-def resident() -> int:
-    with open("/proc/self/statm") as statm:
-        return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+def geometric_mean(values) -> float:
+    return float(np.exp(np.mean(np.log(values))))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pixels", type=int, default=1024)
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--sample", type=int, default=2000, help="rays for the per-ray Python loops")
+    parser.add_argument("--pairs", type=int, default=15, help="alternated casts per row and view")
+    parser.add_argument("--sample", type=int, default=2000, help="rays for the per-ray Python peers")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args()
     machine = f"{platform.platform()}, {os.cpu_count()} cores"
     print(machine, flush=True)
-    mesh = examples.load_frog_tissues().contour_labels()
     n = args.pixels
-    cam = vrc.Camera.framing(mesh.bounds, view="iso", nx=n, ny=n)
-    rays = n * n
+    ratios: dict[tuple[str, str, str], tuple[float, float, float]] = {}
+    coverage, first, memory, sizes = {}, {}, {}, {}
+    for name, make in scenes.SCENES.items():
+        mesh = make()
+        scene = vrc.Scene(mesh)
+        peer = Open3DPeer()
+        peer.build(scene.prepared.points, scene.prepared.triangles)
+        sizes[name] = scene.n_triangles
+        for view in scenes.ZOOMS:
+            camera = scenes.view(mesh, view, n)
+            rays = peer.prepare(*camera_rays(camera))
+            ids = np.asarray(scene.cast(camera, arrays=["TriangleId"])["TriangleId"])
+            coverage[name, view] = float(np.mean(ids >= 0))
+            agree = float(np.mean(peer.collect(peer.run(rays)).ids == ids))
+            for label, options in ROWS.items():
+                ratios[name, view, label] = alternated_ratio(
+                    partial(scene.cast, camera, **options), partial(peer.run, rays), args.pairs
+                )
+                print(name, view, label, f"{ratios[name, view, label][0]:.2f}x", f"ids agree {agree:.4%}", flush=True)
+        camera = scenes.view(mesh, "close", n)
+        rays = peer.prepare(*camera_rays(camera))
+        first[name] = alternated_ratio(partial(vrc.cast, mesh, camera), partial(build_and_cast, peer, scene, rays), 5)
+        memory[name] = scene.memory_bytes / scene.n_triangles  # after casts: with the memory they keep
+        print(name, "first image", f"{1 / first[name][0]:.3f}x", f"{memory[name]:.1f} bytes/triangle", flush=True)
 
-    median_of = partial(median_seconds, repeats=args.repeats)
-
-    before = resident()
-    scene = vrc.Scene(mesh)
-    grown = resident() - before
-    build = median_of(lambda: vrc.Scene(mesh))
-    first = median_of(lambda: vrc.Scene(mesh).cast(cam, arrays=["TriangleId"]))
-    image = scene.cast(cam, arrays=["TriangleId"])
-    ours = median_of(lambda: scene.cast(cam, arrays=["TriangleId"]))
-    ids = np.asarray(image["TriangleId"])
-    per_triangle = scene.memory_bytes / scene.n_triangles  # after casts: with the memory they keep
-    rows = [
-        (
-            "vtkraycast Scene (BVH; auto, float64)",
-            os.cpu_count(),
-            build,
-            first,
-            ours,
-            1.0,
-            1.0,
-            per_triangle,
-            grown / scene.n_triangles,
-        )
+    lines = [
+        f"`python benchmarks/peers.py --pixels {n} --pairs {args.pairs}` on {machine}. "
+        f"{n}x{n} camera rays; each cell is Open3D's cast time over vtkraycast's (its throughput "
+        f"ratio), the median of {args.pairs} casts timed in alternation with Open3D's (quartiles in brackets).",
+        "",
+        "| scene, view (frame covered) | " + " | ".join(ROWS) + " |",
+        "|---|" + "---:|" * len(ROWS),
     ]
-    print(rows[-1], flush=True)
-    # The one-shot vrc.cast builds no BVH: triangles binned to the image's tiles.
-    flat = vrc.Scene(mesh, bvh=False)
-    one_shot = (
-        "vtkraycast vrc.cast (one shot, no BVH)",
-        os.cpu_count(),
-        median_of(lambda: vrc.Scene(mesh, bvh=False)),
-        median_of(lambda: vrc.cast(mesh, cam, arrays=["TriangleId"])),
-        median_of(lambda: flat.cast(cam, arrays=["TriangleId"])),
-        float("nan"),
-        float(np.mean(np.asarray(flat.cast(cam, arrays=["TriangleId"])["TriangleId"]) == ids)),
-        flat.memory_bytes / flat.n_triangles,
-        float("nan"),
-    )
-    rows.append(one_shot[:5] + (ours / one_shot[4],) + one_shot[6:])
-    print(rows[-1], flush=True)
-    # Ids alone let tiles settle most pixels without a ray (sure hits, traverse_tile.hpp);
-    # with depths every hit pixel's ray is made and tested, as the peers' always are.
-    with_depth = median_of(lambda: scene.cast(cam, arrays=["TriangleId", "Depth"]))
-    rows.append(
-        (
-            "vtkraycast Scene, with Depth",
-            os.cpu_count(),
-            build,
-            float("nan"),
-            with_depth,
-            ours / with_depth,
-            float(np.mean(np.asarray(scene.cast(cam, arrays=["TriangleId", "Depth"])["TriangleId"]) == ids)),
-            per_triangle,
-            float("nan"),
+    for name, view in coverage:
+        cells = [f"{m:.2f}x ({q1:.2f} to {q3:.2f})" for m, q1, q3 in (ratios[name, view, label] for label in ROWS)]
+        lines.append(
+            f"| {name} ({sizes[name] / 1e6:.1f} M triangles), {view} ({coverage[name, view]:.0%}) | "
+            + " | ".join(cells)
+            + " |"
         )
-    )
-    print(rows[-1], flush=True)
+    means = {label: geometric_mean([ratios[key + (label,)][0] for key in coverage]) for label in ROWS}
+    lines.append("| **geometric mean** | " + " | ".join(f"**{means[label]:.2f}x**" for label in ROWS) + " |")
+    first_mean = geometric_mean([1 / first[name][0] for name in first])
+    lines += [
+        "",
+        "Targets (issue 25): "
+        + "; ".join(f"{label} {means[label]:.2f}x (target >= {target:g}x)" for label, target in TARGETS.items())
+        + f"; first image (one-shot `vrc.cast`, default arrays, close view) {first_mean:.3f}x "
+        "Open3D's build and first cast "
+        f"(target <= 0.25x; per scene "
+        + ", ".join(f"{name} {1 / first[name][0]:.3f}x" for name in first)
+        + "); bytes per triangle "
+        + ", ".join(f"{name} {memory[name]:.1f}" for name in memory)
+        + " (target <= 80).",
+    ]
+    lines += [""] + all_peers(n, args.sample)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "peers.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    plot(ratios, coverage, machine, args.out / "peers.png")
 
-    origins, directions = camera_rays(cam)
+
+def build_and_cast(peer: Open3DPeer, scene: vrc.Scene, rays) -> None:
+    """Open3D's first image: its scene built, then one cast."""
+    peer.build(scene.prepared.points, scene.prepared.triangles)
+    peer.run(rays)
+
+
+def all_peers(n: int, sample: int) -> list[str]:
+    """Every peer on the frog's framed view, TriangleId: build, first image, cast, agreement
+    (separate medians of 5; per-ray Python peers on a sample of rays, scaled)."""
+    mesh = scenes.frog()
+    camera = scenes.view(mesh, "framed", n)
+    scene = vrc.Scene(mesh)
+    median_of = partial(median_seconds, repeats=5)
+    ids = np.asarray(scene.cast(camera, arrays=["TriangleId"])["TriangleId"])
+    rows = [
+        ("vtkraycast Scene (BVH)", os.cpu_count(), median_of(lambda: vrc.Scene(mesh)),
+         median_of(lambda: vrc.Scene(mesh).cast(camera, arrays=["TriangleId"])),
+         median_of(lambda: scene.cast(camera, arrays=["TriangleId"])), 1.0),
+        ("vtkraycast vrc.cast (one shot, no BVH)", os.cpu_count(), float("nan"),
+         median_of(lambda: vrc.cast(mesh, camera, arrays=["TriangleId"])), float("nan"), 1.0),
+    ]  # fmt: skip
+    origins, directions = camera_rays(camera)
     points, triangles = scene.prepared.points, scene.prepared.triangles
-    rng = np.random.default_rng(1)
-    sample = np.sort(rng.choice(rays, size=min(rays, args.sample), replace=False))
-    alternated = None  # Open3D's re-cast time over ours, the two timed in alternation
+    chosen_sample = np.sort(np.random.default_rng(1).choice(ids.size, size=min(ids.size, sample), replace=False))
     for peer in make_peers() + more_peers():
-        chosen = sample if getattr(peer, "sampled", False) else np.arange(rays)
-        before = resident()
+        chosen = chosen_sample if getattr(peer, "sampled", False) else np.arange(ids.size)
         start = time.perf_counter()
         peer.build(points, triangles)
-        peer_build = time.perf_counter() - start
-        grown = resident() - before
-        if peer_build < 5:  # a median like ours where affordable
-            peer_build = median_of(lambda peer=peer: peer.build(points, triangles))
+        build = time.perf_counter() - start
         prepared = peer.prepare(origins[chosen], directions[chosen])
         start = time.perf_counter()
         out = peer.run(prepared)
-        peer_first = time.perf_counter() - start
-        repeats = args.repeats if peer_first < 20 else 1
-        times = [peer_first]
-        for _ in range(repeats - 1):
-            start = time.perf_counter()
-            out = peer.run(prepared)
-            times.append(time.perf_counter() - start)
-        theirs = float(np.median(times))
-        if isinstance(peer, Open3DPeer) and len(chosen) == rays:
-            pairs = 12 * args.repeats  # (a tenth of a second each: 15 pairs left quartiles 0.7x apart)
-            alternated = {
-                label: (
-                    pairs,
-                    *alternated_ratio(partial(scene.cast, cam, arrays=arrays), partial(peer.run, prepared), pairs),
-                )
-                for label, arrays in (("TriangleId", ["TriangleId"]), ("TriangleId and Depth", ["TriangleId", "Depth"]))
-            }
-        agree = float(np.mean(peer.collect(out).ids == ids[chosen]))
-        scale = rays / len(chosen)  # a sampled peer's times, scaled to the whole image
-        label = peer.name + ("" if len(chosen) == rays else f" [{len(chosen)} rays sampled]")
-        cast = theirs * scale
+        once = time.perf_counter() - start
+        cast = median_of(partial(peer.run, prepared)) if once < 20 else once
+        scale = ids.size / len(chosen)
+        label = peer.name + ("" if len(chosen) == ids.size else f" [{len(chosen)} rays sampled]")
         rows.append(
             (
                 label,
                 peer.threads,
-                peer_build,
-                peer_build + peer_first * scale,
-                cast,
-                ours / cast,
-                agree,
-                float("nan"),
-                grown / scene.n_triangles,
+                build,
+                build + once * scale,
+                cast * scale,
+                float(np.mean(peer.collect(out).ids == ids[chosen])),
             )
         )
         print(rows[-1], flush=True)
-
     lines = [
-        f"`python benchmarks/peers.py --pixels {n}` on {machine}: frog contour "
-        f"({scene.n_triangles:,} triangles), {n}x{n} camera rays, medians of {args.repeats}.",
+        f"Every peer, frog contour ({scene.n_triangles:,} triangles), framed view, TriangleId, "
+        "separate medians of 5 (not alternated):",
         "",
-        "| caster | threads | build s | first image s | cast s | Mrays/s | cast time vs vtkraycast "
-        "| TriangleId agreement | bytes/triangle (structure + memory kept for casts) "
-        "| resident growth bytes/triangle |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| caster | threads | build s | first image s | cast s | Mrays/s | TriangleId agreement |",
+        "|---|---:|---:|---:|---:|---:|---:|",
     ]
-    for name, threads, b, f, c, ratio, agree, mem, grown in rows:
-        mem_text = "-" if np.isnan(mem) else f"{mem:.1f}"
-        grown_text = "-" if np.isnan(grown) else f"{grown:.0f}"
-        first_text = "-" if np.isnan(f) else f"{f:.3f}"
-        lines.append(
-            f"| {name} | {threads} | {b:.3f} | {first_text} | {c:.4f} | {rays / c / 1e6:.2f} | {1 / ratio:.2f}x "
-            f"| {agree:.4%} | {mem_text} | {grown_text} |"
-        )
-    by_name = {row[0]: row for row in rows}
-    open3d = by_name.get(Open3DPeer.name)
-    if open3d is not None:
-        for label, (pairs, median, q1, q3) in (alternated or {}).items():
-            lines += [
-                "",
-                f"Re-casts of {label} timed in alternation with Open3D's cast ({pairs} pairs): Open3D's time over "
-                f"vtkraycast's, median {median:.2f}x (quartiles {q1:.2f}x to {q3:.2f}x).",
-            ]
-        lines += [
-            "",
-            f"Targets (issue 6): re-cast throughput {open3d[4] / ours:.2f}x Open3D's (target >= 3x); "
-            f"first image {rows[0][3] / open3d[3]:.2f}x Open3D's with a Scene, {rows[1][3] / open3d[3]:.2f}x "
-            f"with the one-shot vrc.cast (target <= 0.3x); {per_triangle:.1f} bytes per triangle (target <= 80).",
-        ]
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "peers.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
-    plot(rows, rays, machine, args.out / "peers.png")
+    for name, threads, build, first, cast, agree in rows:
+        text = [("-" if np.isnan(v) else f"{v:.3f}") for v in (build, first, cast)]
+        rate = "-" if np.isnan(cast) else f"{ids.size / cast / 1e6:.2f}"
+        lines.append(f"| {name} | {threads} | {' | '.join(text)} | {rate} | {agree:.4%} |")
+    return lines
 
 
-def plot(rows, rays: int, machine: str, path: Path) -> None:
-    """Throughput of a re-cast and time to the first image, one bar per caster."""
+def plot(ratios, coverage, machine: str, path: Path) -> None:
+    """One group of bars per scene and view, one bar per row, the targets as lines."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    names = [row[0] for row in rows]
-    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 0.45 * len(rows) + 1.5), sharey=True)
-    y = np.arange(len(rows))
-    colours = ["tab:blue" if name.startswith("vtkraycast") else "tab:gray" for name in names]
-    left.barh(y, [rays / row[4] / 1e6 for row in rows], color=colours)
-    left.set_xscale("log")
-    left.set_xlabel("camera rays per second, re-cast (millions, log)")
-    right.barh(y, [0 if np.isnan(row[3]) else row[3] for row in rows], color=colours)
-    right.set_xscale("log")
-    right.set_xlabel("first image: preparation + cast (s, log)")
-    left.set_yticks(y, names)
-    left.invert_yaxis()
-    fig.suptitle(f"frog contour, 1.5 M triangles; {machine}", fontsize=9)
+    keys = list(coverage)
+    fig, ax = plt.subplots(figsize=(11, 4))
+    x = np.arange(len(keys))
+    width = 0.8 / len(ROWS)
+    for i, label in enumerate(ROWS):
+        ax.bar(x + i * width, [ratios[key + (label,)][0] for key in keys], width, label=label)
+    for target in TARGETS.values():
+        ax.axhline(target, ls="--", lw=0.8, color="gray")
+    ax.axhline(1.0, lw=0.8, color="black")
+    ax.set_xticks(x + width, [f"{name}\n{view} ({coverage[name, view]:.0%})" for name, view in keys], fontsize=8)
+    ax.set_ylabel("Open3D's cast time / vtkraycast's")
+    ax.legend(fontsize=8)
+    ax.set_title(f"alternated casts, 1024x1024; {machine}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 

@@ -32,7 +32,7 @@ def terrain(n: int = 1415) -> pv.PolyData:
     xx, yy = np.meshgrid(x, x, indexing="xy")
     z = 0.6 * np.sin(1.3 * xx) * np.cos(0.9 * yy) + 0.25 * np.sin(4.1 * xx + 2.3 * yy) + 0.05 * xx
     grid = pv.StructuredGrid(xx, yy, z)
-    surface = grid.extract_surface(pass_pointid=False, pass_cellid=False).triangulate()
+    surface = grid.extract_surface(algorithm="dataset_surface", pass_pointid=False, pass_cellid=False).triangulate()
     height = surface.points[:, 2]
     surface.point_data["Elevation"] = height.astype(np.float32)
     gx = 0.6 * 1.3 * np.cos(1.3 * surface.points[:, 0]) * np.cos(0.9 * surface.points[:, 1])
