@@ -2,11 +2,15 @@
 // without copies; dtypes and layouts are fixed by the Python side. The GIL is released
 // during every build and cast and re-taken only to report progress and check signals.
 #include <nanobind/nanobind.h>
+#include <nanobind/stl/array.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/function.h>
 #include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
 
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -292,6 +296,18 @@ NB_MODULE(_core, m) {
         .def_prop_ro("n_triangles", &vrc::Scene::n_triangles)
         .def_prop_ro("n_nodes", [](const vrc::Scene& s) { return s.nodes.size(); })
         .def_prop_ro("n_camera_nodes", [](const vrc::Scene& s) { return s.camera.nodes.size(); })
+        .def_prop_ro(
+            "point_bounds",
+            [](const vrc::Scene& s) {
+                std::array<double, 6> b{HUGE_VAL, -HUGE_VAL, HUGE_VAL, -HUGE_VAL, HUGE_VAL, -HUGE_VAL};
+                for (std::size_t i = 0; i < s.points.size(); i += 3)
+                    for (int k = 0; k < 3; ++k) {
+                        b[2 * k] = std::min(b[2 * k], s.points[i + k]);
+                        b[2 * k + 1] = std::max(b[2 * k + 1], s.points[i + k]);
+                    }
+                return b;
+            },
+            "(xmin, xmax, ymin, ymax, zmin, zmax) of the points triangles use (infinite ones when there are none).")
         .def_prop_ro("memory_bytes", &vrc::Scene::memory_bytes,
                      "Bytes held by the BVH, the triangles, the points and the memory kept for camera casts.");
     m.attr("max_binned_pixels") = vrc::ImageRect::kMaxPixels;  // widest image a scene without a BVH casts

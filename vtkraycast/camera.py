@@ -35,6 +35,16 @@ def _pixels(value: Any, name: str) -> int:
     return value
 
 
+def _unit(v: np.ndarray) -> np.ndarray:
+    """v / |v|, first scaled by a power of two so that squaring neither overflows nor
+    underflows at any magnitude (0 stays 0)."""
+    largest = float(np.abs(v).max())
+    if largest == 0:
+        return v
+    v = np.ldexp(v, -math.frexp(largest)[1])
+    return v / np.linalg.norm(v)
+
+
 class Camera:
     """A pinhole (or parallel) camera and its pixel grid.
 
@@ -117,14 +127,12 @@ class Camera:
         near, far = float(near), float(far)
         if math.isnan(near) or math.isnan(far) or near < 0 or far <= near:
             raise ValueError(f"need 0 <= near < far, got near={near}, far={far}")
-        forward = look_v - eye_v
         with np.errstate(over="ignore"):
-            distance = float(np.linalg.norm(forward))
-            up_length = float(np.linalg.norm(up_v))
-        if not distance > 0:
+            forward = look_v - eye_v
+        if not forward.any():
             raise ValueError("eye and look_at coincide: the view direction is undefined")
-        if not (math.isfinite(distance) and math.isfinite(up_length)):
-            raise ValueError("eye, look_at and view_up must be within 1e150 of each other (their distance overflows)")
+        if not np.isfinite(forward).all():
+            raise ValueError("eye and look_at are too far apart: their difference overflows float64")
         values = (eye_v, look_v, up_v, d, w, h, nx, ny, bool(parallel), near, far)
         for name, value in zip(self._FIELDS, values):
             if isinstance(value, np.ndarray):
@@ -162,11 +170,10 @@ class Camera:
         return Camera(kwargs.pop("eye"), kwargs.pop("look_at"), kwargs.pop("view_up"), **kwargs)
 
     def _axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        backward = self.eye - self.look_at
-        backward = backward / np.linalg.norm(backward)
-        right = np.cross(self.view_up, backward)
+        backward = _unit(self.eye - self.look_at)
+        right = np.cross(_unit(self.view_up), backward)
         norm = np.linalg.norm(right)
-        if not norm > 1e-12 * np.linalg.norm(self.view_up):
+        if not norm > 1e-12:
             raise ValueError("view_up is parallel to the view direction (or zero): the image orientation is undefined")
         right = right / norm
         return right, np.cross(backward, right), backward

@@ -15,6 +15,7 @@ from . import _core
 from .camera import Camera
 from .fields import allocate, mesh_arrays, output_bytes, request_outputs, select_arrays
 from .image import fill_image
+from .magnitudes import direction_shifts, scene_scale, shift_lengths
 from .mesh import prepare_mesh
 
 __all__ = ["PRECISIONS", "STRATEGIES", "Scene"]
@@ -52,6 +53,14 @@ def _precision(precision: str) -> type:
         return PRECISIONS[precision]
     except (KeyError, TypeError):
         raise ValueError(f"unknown precision {precision!r}; choose 'float64' or 'float32'") from None
+
+
+def _shifted(bound: float, shift: int) -> float:
+    """A t bound in the core's units: beyond float64 it bounds nothing the core returns."""
+    try:
+        return math.ldexp(bound, shift)
+    except OverflowError:
+        return math.inf
 
 
 def _rays(value: Any, name: str) -> np.ndarray:
@@ -101,7 +110,13 @@ class Scene:
         if not isinstance(bvh, (bool, np.bool_)):
             raise TypeError(f"bvh must be True or False, got {bvh!r}")
         self._mesh = prepare_mesh(mesh)
-        self._core = _core.Scene(self._mesh.points, self._mesh.triangles, _threads(threads), bool(bvh))
+        points, triangles = self._mesh.points, self._mesh.triangles
+        self._core = _core.Scene(points, triangles, _threads(threads), bool(bvh))
+        self._scale = scene_scale(self._core.point_bounds)
+        if self._scale.shift:  # rare: a scene beyond 2**±32 across, built again, scaled
+            with np.errstate(over="ignore"):  # (only points no triangle uses can overflow)
+                points = np.ldexp(points, self._scale.shift)
+            self._core = _core.Scene(points, triangles, _threads(threads), bool(bvh))
 
     @property
     def has_bvh(self) -> bool:
@@ -217,9 +232,19 @@ class Scene:
                 "(VTKRAYCAST_MAX_OUTPUT_BYTES); cast a smaller image or in parts"
             )
         request = self._request(strategy, precision, accel, threads, backface_culling)
-        request.frame = camera.frame
-        request.d, request.width, request.height = camera.d, camera.w, camera.h
-        request.near, request.far = camera.near, camera.far
+        shift = self._scale.shift
+        self._scale.check_origins(camera.eye[None], real, "the camera's eye")
+        frame = np.array(camera.frame)
+        frame[0] = np.ldexp(frame[0], shift)
+        request.frame = frame
+        # A pinhole's window (d, w, h) scaled on its own changes no ray but the directions'
+        # length: brought to about 1, as intersect's directions are. A parallel camera's
+        # window is its rays' extent.
+        window = shift
+        if not camera.parallel:
+            window += direction_shifts(np.array([[camera.d, camera.w, camera.h]]), bounded=True)
+        request.d, request.width, request.height = (math.ldexp(x, window) for x in (camera.d, camera.w, camera.h))
+        request.near, request.far = _shifted(camera.near, shift), _shifted(camera.far, shift)
         request.nx, request.ny, request.parallel = camera.nx, camera.ny, camera.parallel
         buffers = allocate(found, names, n, real)
         request_outputs(request, self._mesh, found, buffers)
@@ -232,6 +257,9 @@ class Scene:
             request.progress = poll
             if not _core.cast(self._core, request):
                 raise InterruptedError("the cast was aborted")
+        for name in ("Depth", "Position"):
+            if name in buffers:
+                shift_lengths(buffers[name], shift, name, distance=name == "Depth")
         return camera, buffers
 
     def _request(
@@ -262,6 +290,10 @@ class Scene:
     ) -> dict[str, np.ndarray]:
         """Closest hits of arbitrary rays ``origin + t * direction``, ``tmin <= t <= tmax``.
 
+        ``tmin`` must be >= 0 (hits behind an origin are not cast). Rays far beyond what the
+        precision's arithmetic holds, or hits whose ``t`` leaves the output type's range,
+        raise a ValueError naming the limit (README, "Supported range").
+
         Returns a dict of arrays: ``triangle_id`` and ``cell_id`` (int64, -1 on a miss),
         ``t`` (in units of the direction's length, NaN on a miss) and ``barycentric``
         (``(n, 3)`` weights of the triangle's points, NaN on a miss).
@@ -276,13 +308,26 @@ class Scene:
         tmin, tmax = float(tmin), float(tmax)
         if math.isnan(tmin) or math.isnan(tmax) or tmin > tmax:
             raise ValueError(f"need tmin <= tmax, got tmin={tmin}, tmax={tmax}")
+        if tmin < 0:
+            raise ValueError(
+                f"tmin must be >= 0, got {tmin}: hits behind a ray's origin are not cast "
+                "(reverse the direction, or move the origin back, to find them)"
+            )
+        self._scale.check_origins(o, _precision(precision), "a ray origin")
+        # Lengths in the core are 2**k the user's, directions 2**j theirs: t there is 2**(k - j) t.
+        k = self._scale.shift
+        j = direction_shifts(d, bounded=(tmin, tmax) != (0.0, math.inf))
         request = self._request(strategy, precision, accel, threads, backface_culling)
-        request.origins, request.directions, request.tmin, request.tmax = o, d, tmin, tmax
+        request.origins = np.ldexp(o, k) if k else o
+        request.directions = np.ldexp(d, np.reshape(j, (-1, 1))) if np.any(j) else d
+        if np.ndim(j) == 0:  # (else the bounds are 0 and inf, the same in any unit)
+            request.tmin, request.tmax = _shifted(tmin, k - j), _shifted(tmax, k - j)
         found = mesh_arrays(self._mesh)
         names = ["TriangleId", "CellId", "Depth", "Barycentric"]
         buffers = allocate(found, names, o.shape[0], _precision(precision))
         request_outputs(request, self._mesh, found, buffers)
         _core.cast(self._core, request)
+        shift_lengths(buffers["Depth"], k - j, "t")
         return {
             "triangle_id": buffers["TriangleId"],
             "cell_id": buffers["CellId"],
