@@ -103,7 +103,16 @@ def check_camera_scaling(exponent: int, precision: str, strategy: str, parallel:
     scaled_camera = camera.replace(
         eye=camera.eye * f, look_at=camera.look_at * f, d=camera.d * f, w=camera.w * f, h=camera.h * f
     )
-    if precision == "float32" and abs(exponent) > 120:  # Depth itself leaves float32's range
+    depth = np.ldexp(np.asarray(base["Depth"], np.float64), exponent)
+    position = np.ldexp(np.asarray(base["Position"], np.float64), exponent)
+    hit = np.isfinite(depth)
+    limits = np.finfo(np.float32)
+    fits = (
+        (depth[hit] >= limits.tiny).all()
+        and (depth[hit] <= limits.max).all()
+        and (abs(position[hit]) <= limits.max).all()
+    )
+    if precision == "float32" and not fits:  # Depth or Position itself leaves float32's range
         with pytest.raises(ValueError, match="beyond the range of float32"):
             vrc.Scene(scaled_mesh).cast(scaled_camera, arrays=arrays, precision=precision, strategy=strategy)
         return
