@@ -72,9 +72,9 @@ def main(argv: list[str] | None = None) -> None:
         assert t > 1.0, "hits lie beyond the image plane"
         end = cam.eye + t * direction
         np.testing.assert_allclose(end, image["Position"][k], atol=1e-9 * size)
-        found = scene.intersect(cam.eye, direction)
-        assert found["triangle_id"][0] == image["TriangleId"][k]
-        np.testing.assert_allclose(found["t"][0], t, rtol=1e-12)
+        found = scene.intersect(cam.eye, direction)  # one ray in, one value out per array
+        assert found["triangle_id"] == image["TriangleId"][k]
+        np.testing.assert_allclose(found["t"], t, rtol=1e-12)
         rays.append((cam.eye, end))
 
     # -- the picture -------------------------------------------------------------------------

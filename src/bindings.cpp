@@ -86,8 +86,7 @@ bool render_with(const vrc::Scene& scene, const Rays& rays, bool brute_force, co
 
 template <class Real, class Rays>
 bool dispatch(const vrc::Scene& scene, const Rays& rays, Strategy strategy, bool brute_force,
-              const vrc::Outputs<Real>& out, bool cull, unsigned threads, const vrc::Poll& poll) {
-    const vrc::CastContext context{cull};
+              const vrc::Outputs<Real>& out, const vrc::CastContext& context, unsigned threads, const vrc::Poll& poll) {
     switch (strategy) {
         case Strategy::Auto:  // the fastest exact test measured (benchmarks/runtime_vs_error.py)
         case Strategy::Watertight:
@@ -127,6 +126,7 @@ struct Request {
     double tmin = 0, tmax = HUGE_VAL;
     std::string strategy = "auto", accel = "bvh", precision = "float64";
     bool backface_culling = false;
+    bool any_hit = false;  // rays only: whether anything lies in [tmin, tmax], found the quickest way
     int threads = 0;
     std::optional<nb::callable> progress;
     std::optional<IdsOut> triangle_id, cell_id;
@@ -249,7 +249,8 @@ bool run(const vrc::Scene& scene, const Rays& rays, const Request& q) {
     bool completed;
     {
         nb::gil_scoped_release release;
-        completed = dispatch<Real>(scene, rays, s, brute_force, out, q.backface_culling, n_threads, std::ref(poll));
+        completed = dispatch<Real>(scene, rays, s, brute_force, out, vrc::CastContext{q.backface_culling, q.any_hit},
+                                   n_threads, std::ref(poll));
     }
     if (poll.raised) throw nb::python_error();
     return completed;
@@ -257,6 +258,7 @@ bool run(const vrc::Scene& scene, const Rays& rays, const Request& q) {
 
 template <class Real>
 bool cast_as(const vrc::Scene& scene, const Request& q) {
+    if (q.frame && q.any_hit) throw std::invalid_argument("any_hit serves rays, not cameras");
     if (q.frame) return run<Real>(scene, camera_rays(scene, q), q);
     if (!q.origins || !q.directions) throw std::invalid_argument("a request needs a camera frame or origins and directions");
     if (q.origins->shape(0) != q.directions->shape(0))
@@ -330,6 +332,7 @@ NB_MODULE(_core, m) {
         .def_rw("accel", &Request::accel)
         .def_rw("precision", &Request::precision)
         .def_rw("backface_culling", &Request::backface_culling)
+        .def_rw("any_hit", &Request::any_hit)
         .def_rw("threads", &Request::threads)
         .def_rw("progress", &Request::progress, nb::arg().none())
         .def_rw("triangle_id", &Request::triangle_id, nb::arg().none())

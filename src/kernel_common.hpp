@@ -12,6 +12,7 @@ namespace vrc {
 /// Per-cast settings every kernel sees.
 struct CastContext {
     bool cull_back_faces = false;
+    bool any_hit = false;  ///< rays ask whether anything is hit (HitPolicy::any), not what first
 };
 
 /// Base of the kernels that test a triangle from its three points: the traversal calls

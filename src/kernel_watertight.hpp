@@ -84,8 +84,11 @@ class Watertight : public PointKernel<Watertight<Real>> {
             // Is the plane in front of the origin or behind it? Within rounding of 0 (a
             // surface through the eye) the exact orientation of the origin decides:
             // t = det[A, B, C] / d.n exactly, and this kernel's det has the sign of -d.n.
-            if (exact::volume(pa, pb, pc, org_) * (det > 0 ? -1 : 1) < 0) return false;
-            tt = std::max(tt, 0.0);
+            // Exactly on the plane (a ray leaving a vertex or edge), the ray meets the
+            // plane at its origin alone: t = 0, whatever the ill-conditioned quotient says.
+            const double volume = exact::volume(pa, pb, pc, org_);
+            if (volume * (det > 0 ? -1 : 1) < 0) return false;
+            tt = volume == 0 ? 0.0 : std::max(tt, 0.0);
         }
         if (!(tt >= tmin && tt <= tmax)) return false;
         t = tt;

@@ -127,9 +127,15 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         rays.for_each_in_tile(tile, [&](std::size_t k) {
             if (!may_hit) return store(k, Ray{}, Hit<Real>{});  // (store reads the ray of hits only)
             const Ray ray = rays.ray(k);
-            store(k, ray,
-                  kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, context)
-                              : closest_hit<Kernel, Real>(scene, ray, context));
+            constexpr HitPolicy kAny = HitPolicy::any;
+            if (context.any_hit)
+                store(k, ray,
+                      kBruteForce ? brute_force_hit<Kernel, Real, kAny>(scene, ray, context)
+                                  : closest_hit<Kernel, Real, kAny>(scene, ray, context));
+            else
+                store(k, ray,
+                      kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, context)
+                                  : closest_hit<Kernel, Real>(scene, ray, context));
         });
     };
     // Camera rays go a tile at a time (traverse_tile.hpp), through the BVH or, on a flat

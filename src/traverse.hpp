@@ -94,9 +94,13 @@ inline void test_triangle(const Kernel& kernel, const Scene& scene, uint32_t i, 
     for (int c = 0; c < 3; ++c) hit.b[c] = b[c];
 }
 
+/// What a traversal looks for: the closest hit (ties to the lowest input triangle index),
+/// or any hit in [tmin, tmax], returned as soon as one is found (occlusion queries).
+enum class HitPolicy { closest, any };
+
 /// The seed lecture's method (accel = "none"): the whole model's bounding sphere, then its
 /// bounding box, then every triangle. Ties go to the lowest input triangle index, as below.
-template <template <class> class Kernel, class Real>
+template <template <class> class Kernel, class Real, HitPolicy kPolicy = HitPolicy::closest>
 Hit<Real> brute_force_hit(const Scene& scene, const Ray& ray, const CastContext& context) {
     Hit<Real> hit;
     if (!may_hit_sphere(scene, ray)) return hit;
@@ -104,13 +108,17 @@ Hit<Real> brute_force_hit(const Scene& scene, const Ray& ray, const CastContext&
         return hit;
     const Kernel<Real> kernel(ray, context);
     double bound = ray.tmax;
-    for (uint32_t i = 0, n = uint32_t(scene.n_triangles()); i < n; ++i) test_triangle(kernel, scene, i, ray.tmin, bound, hit);
+    for (uint32_t i = 0, n = uint32_t(scene.n_triangles()); i < n; ++i) {
+        test_triangle(kernel, scene, i, ray.tmin, bound, hit);
+        if (kPolicy == HitPolicy::any && hit.found()) break;
+    }
     return hit;
 }
 
 /// Closest hit along `ray` with ray.tmin <= t <= ray.tmax. Equal `t` goes to the lowest
 /// input triangle index, so duplicates and coplanar overlaps have one deterministic winner.
-template <template <class> class Kernel, class Real>
+/// With HitPolicy::any, the first hit found in the range instead.
+template <template <class> class Kernel, class Real, HitPolicy kPolicy = HitPolicy::closest>
 Hit<Real> closest_hit(const Scene& scene, const Ray& ray, const CastContext& context) {
     Hit<Real> hit;
     if (scene.nodes.empty()) return hit;
@@ -127,8 +135,10 @@ Hit<Real> closest_hit(const Scene& scene, const Ray& ray, const CastContext& con
     for (;;) {
         const Node& node = scene.nodes[current];
         if (node.is_leaf()) {
-            for (uint32_t i = node.index, end = node.index + node.count; i < end; ++i)
+            for (uint32_t i = node.index, end = node.index + node.count; i < end; ++i) {
                 test_triangle(kernel, scene, i, ray.tmin, bound, hit);
+                if (kPolicy == HitPolicy::any && hit.found()) return hit;
+            }
         } else {
             const uint32_t left = node.index;
             double tl = boxes.enter(scene.nodes[left].box, ray.tmin, bound);

@@ -178,8 +178,8 @@ def test_cast_accepts_vtk_cameras(scene, sphere):
 @pytest.mark.parametrize(
     ("origins", "directions", "message"),
     [
-        (np.zeros((4, 2)), np.ones((4, 3)), r"origins must have shape \(n, 3\)"),
-        (np.zeros((4, 3)), np.ones((3, 3)), "differ in length"),
+        (np.zeros((4, 2)), np.ones((4, 3)), r"origins must have shape \(\.\.\., 3\)"),
+        (np.zeros((4, 3)), np.ones((3, 3)), "do not broadcast"),
         (np.zeros((2, 3)), [[0, 0, 1], [0, 0, 0]], "directions must be non-zero"),
         (np.zeros((2, 3)), [[0, 0, 1], [0, np.nan, 1]], "directions must be finite"),
         (np.zeros((1, 3, 1)), np.ones((1, 3)), r"origins must have shape"),

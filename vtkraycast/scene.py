@@ -24,6 +24,16 @@ __all__ = ["PRECISIONS", "STRATEGIES", "Scene"]
 STRATEGIES = ("auto", "watertight", "moller-trumbore", "plane", "cramer")
 ACCELS = ("bvh", "none")
 PRECISIONS = {"float64": np.float64, "float32": np.float32}
+#: Scene.intersect's arrays, by the names it returns them under, and the image arrays they are.
+RAY_ARRAYS = {
+    "triangle_id": "TriangleId",
+    "cell_id": "CellId",
+    "t": "Depth",
+    "barycentric": "Barycentric",
+    "position": "Position",
+    "normal": "Normal",
+}
+DEFAULT_RAY_ARRAYS = ("triangle_id", "cell_id", "t", "barycentric")
 #: Refuse images whose output arrays alone would exceed this many bytes.
 _MAX_OUTPUT_BYTES = int(os.environ.get("VTKRAYCAST_MAX_OUTPUT_BYTES", 16 * 2**30))
 
@@ -63,18 +73,32 @@ def _shifted(bound: float, shift: int) -> float:
         return math.inf
 
 
-def _rays(value: Any, name: str) -> np.ndarray:
-    a = np.asarray(value)
-    if a.ndim == 1 and a.shape[0] == 3:
-        a = a[None, :]
-    if a.ndim != 2 or a.shape[1] != 3:
-        raise ValueError(f"{name} must have shape (n, 3), got {np.shape(value)}")
-    if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
-        raise TypeError(f"{name} must be numeric, got dtype {a.dtype}")
-    a = np.ascontiguousarray(a, dtype=np.float64)
-    if not np.isfinite(a).all():
-        raise ValueError(f"{name} must be finite; row {int(np.flatnonzero(~np.isfinite(a).all(1))[0])} is not")
-    return a
+def _ray_batch(origins: Any, directions: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+    """Origins and directions of shapes (..., 3), broadcast against each other, as (n, 3)
+    float64 rows, with the batch shape the outputs take."""
+    arrays = []
+    for value, name in ((origins, "origins"), (directions, "directions")):
+        a = np.asarray(value)
+        if a.ndim == 0 or a.shape[-1] != 3:
+            raise ValueError(f"{name} must have shape (..., 3), got {a.shape}")
+        if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+            raise TypeError(f"{name} must be numeric, got dtype {a.dtype}")
+        arrays.append(a)
+    try:
+        shape = np.broadcast_shapes(arrays[0].shape[:-1], arrays[1].shape[:-1])
+    except ValueError:
+        raise ValueError(
+            f"origins {arrays[0].shape} and directions {arrays[1].shape} do not broadcast against each other"
+        ) from None
+    rows = []
+    for a, name in zip(arrays, ("origins", "directions")):
+        a = np.ascontiguousarray(np.broadcast_to(a, (*shape, 3)).reshape(-1, 3), dtype=np.float64)
+        if not np.isfinite(a).all():
+            raise ValueError(f"{name} must be finite; row {int(np.flatnonzero(~np.isfinite(a).all(1))[0])} is not")
+        rows.append(a)
+    if len(rows[1]) and not (np.abs(rows[1]).max(axis=1) > 0).all():
+        raise ValueError("directions must be non-zero")
+    return rows[0], rows[1], shape
 
 
 class Scene:
@@ -282,6 +306,7 @@ class Scene:
         *,
         tmin: float = 0.0,
         tmax: float = math.inf,
+        arrays: Iterable[str] | str | None = None,
         strategy: str = "auto",
         precision: str = "float64",
         accel: str = "bvh",
@@ -290,21 +315,95 @@ class Scene:
     ) -> dict[str, np.ndarray]:
         """Closest hits of arbitrary rays ``origin + t * direction``, ``tmin <= t <= tmax``.
 
+        ``origins`` and ``directions`` have shapes ``(..., 3)`` and are broadcast against each
+        other; every output has the broadcast batch shape ``(...)`` (``(..., 3)`` for vectors).
+        ``arrays`` picks among ``triangle_id`` and ``cell_id`` (int64, -1 on a miss), ``t`` (in
+        units of the direction's length), ``barycentric`` (weights of the triangle's points),
+        ``position`` (the hit point) and ``normal`` (the triangle's unit normal, right-hand
+        rule), NaN on a miss; by default the first four. Work for the others is skipped.
+
         ``tmin`` must be >= 0 (hits behind an origin are not cast). Rays far beyond what the
         precision's arithmetic holds, or hits whose ``t`` leaves the output type's range,
         raise a ValueError naming the limit (README, "Supported range").
 
-        Returns a dict of arrays: ``triangle_id`` and ``cell_id`` (int64, -1 on a miss),
-        ``t`` (in units of the direction's length, NaN on a miss) and ``barycentric``
-        (``(n, 3)`` weights of the triangle's points, NaN on a miss).
+        Examples
+        --------
+        >>> import pyvista as pv
+        >>> import vtkraycast as vrc
+        >>> scene = vrc.Scene(pv.Plane(i_size=2, j_size=2))
+        >>> hits = scene.intersect([0, 0, 1], [[0, 0, -1], [0.5, 0, -1]], arrays=["t", "position"])
+        >>> hits["t"].tolist(), hits["position"][1].tolist()
+        ([1.0, 1.0], [0.5, 0.0, 0.0])
         """
+        names = _ray_arrays(arrays)
+        real = _precision(precision)
+        request, shape, (k, j) = self._ray_request(
+            origins, directions, tmin, tmax, strategy, precision, accel, threads, backface_culling
+        )
+        found = mesh_arrays(self._mesh)
+        buffers = allocate(found, [RAY_ARRAYS[name] for name in names], request.origins.shape[0], real)
+        request_outputs(request, self._mesh, found, buffers)
+        _core.cast(self._core, request)
+        if "t" in names:
+            shift_lengths(buffers["Depth"], k - j, "t")
+        if "position" in names:
+            shift_lengths(buffers["Position"], k, "position", distance=False)
+        return {name: _batched(buffers[RAY_ARRAYS[name]], shape) for name in names}
+
+    def occluded(
+        self,
+        origins: Any,
+        directions: Any,
+        *,
+        tmin: float = 0.0,
+        tmax: float = math.inf,
+        strategy: str = "auto",
+        precision: str = "float64",
+        accel: str = "bvh",
+        threads: int | None = None,
+        backface_culling: bool = False,
+    ) -> np.ndarray:
+        """Whether any triangle lies on each ray within ``tmin <= t <= tmax``: a bool array of
+        the broadcast batch shape of ``origins`` and ``directions`` (``(..., 3)`` each). Each
+        ray stops at the first triangle found; the decision is as exact as :meth:`intersect`'s
+        (a ray is occluded exactly when ``intersect`` finds a hit in the range).
+
+        Examples
+        --------
+        >>> import pyvista as pv
+        >>> import vtkraycast as vrc
+        >>> scene = vrc.Scene(pv.Sphere())
+        >>> scene.occluded([0, 0, 2], [[0, 0, -1], [0, 0, 1]]).tolist()
+        [True, False]
+        >>> scene.occluded([0, 0, 2], [0, 0, -1], tmax=1.0).tolist()  # the sphere is 1.5 away
+        False
+        """
+        request, shape, _ = self._ray_request(
+            origins, directions, tmin, tmax, strategy, precision, accel, threads, backface_culling
+        )
+        request.any_hit = True
+        mask = np.empty(request.origins.shape[0], np.uint8)
+        request.valid = mask
+        _core.cast(self._core, request)
+        return mask.view(bool).reshape(shape)
+
+    def _ray_request(
+        self,
+        origins: Any,
+        directions: Any,
+        tmin: float,
+        tmax: float,
+        strategy: str,
+        precision: str,
+        accel: str,
+        threads: int | None,
+        backface_culling: bool,
+    ) -> tuple[_core.Request, tuple[int, ...], tuple[int, int | np.ndarray]]:
+        """The request for rays (checked, in the core's units), the batch shape, and the
+        shifts k (lengths) and j (directions): t in the core is 2**(k - j) t."""
         if not self.has_bvh and _accel(accel) != "none":
             raise ValueError('this scene was built with bvh=False: intersect needs accel="none" (or bvh=True)')
-        o, d = _rays(origins, "origins"), _rays(directions, "directions")
-        if o.shape[0] != d.shape[0]:
-            raise ValueError(f"origins and directions differ in length: {o.shape[0]} and {d.shape[0]}")
-        if o.shape[0] and not (np.abs(d).max(axis=1) > 0).all():
-            raise ValueError("directions must be non-zero")
+        o, d, shape = _ray_batch(origins, directions)
         tmin, tmax = float(tmin), float(tmax)
         if math.isnan(tmin) or math.isnan(tmax) or tmin > tmax:
             raise ValueError(f"need tmin <= tmax, got tmin={tmin}, tmax={tmax}")
@@ -314,7 +413,6 @@ class Scene:
                 "(reverse the direction, or move the origin back, to find them)"
             )
         self._scale.check_origins(o, _precision(precision), "a ray origin")
-        # Lengths in the core are 2**k the user's, directions 2**j theirs: t there is 2**(k - j) t.
         k = self._scale.shift
         j = direction_shifts(d, bounded=(tmin, tmax) != (0.0, math.inf))
         request = self._request(strategy, precision, accel, threads, backface_culling)
@@ -322,18 +420,21 @@ class Scene:
         request.directions = np.ldexp(d, np.reshape(j, (-1, 1))) if np.any(j) else d
         if np.ndim(j) == 0:  # (else the bounds are 0 and inf, the same in any unit)
             request.tmin, request.tmax = _shifted(tmin, k - j), _shifted(tmax, k - j)
-        found = mesh_arrays(self._mesh)
-        names = ["TriangleId", "CellId", "Depth", "Barycentric"]
-        buffers = allocate(found, names, o.shape[0], _precision(precision))
-        request_outputs(request, self._mesh, found, buffers)
-        _core.cast(self._core, request)
-        shift_lengths(buffers["Depth"], k - j, "t")
-        return {
-            "triangle_id": buffers["TriangleId"],
-            "cell_id": buffers["CellId"],
-            "t": buffers["Depth"],
-            "barycentric": buffers["Barycentric"],
-        }
+        return request, shape, (k, j)
+
+
+def _ray_arrays(arrays: Iterable[str] | str | None) -> list[str]:
+    if arrays is None:
+        return list(DEFAULT_RAY_ARRAYS)
+    names = [arrays] if isinstance(arrays, str) else list(arrays)
+    for name in names:
+        if name not in RAY_ARRAYS:
+            raise ValueError(f"unknown ray array {name!r}; available: {', '.join(RAY_ARRAYS)}")
+    return list(dict.fromkeys(names))
+
+
+def _batched(values: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    return values.reshape(shape + values.shape[1:])
 
 
 @contextmanager

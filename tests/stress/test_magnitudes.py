@@ -65,7 +65,7 @@ def test_power_of_two_scaling_is_exact(m, n, corners, offset, aim, precision):
     results = []
     for a, b in ((0, 0), (m, n)):
         scene = vrc.Scene(pv.PolyData(np.ldexp(points, a), faces=[3, 0, 1, 2]))
-        results.append(scene.intersect(np.ldexp(origin, a), np.ldexp(direction, b), precision=precision))
+        results.append(scene.intersect(np.ldexp(origin, a)[None], np.ldexp(direction, b)[None], precision=precision))
     base, scaled = results
     assert base["triangle_id"][0] == 0 and scaled["triangle_id"][0] == 0
     assert np.array_equal(scaled["barycentric"], base["barycentric"])
@@ -123,7 +123,13 @@ def check_camera_scaling(exponent: int, precision: str, strategy: str, parallel:
         assert np.array_equal(image["TriangleId"], base["TriangleId"])
         assert np.array_equal(image["Barycentric"], base["Barycentric"], equal_nan=True)
         assert np.array_equal(image["Depth"], np.ldexp(base["Depth"], exponent), equal_nan=True)
-        assert np.array_equal(image["Position"], np.ldexp(base["Position"], exponent), equal_nan=True)
+        # (a coordinate near 0 may scale into the subnormals, where it keeps fewer digits)
+        expected = np.ldexp(base["Position"], exponent)
+        normal = ~(np.abs(expected) < np.finfo(expected.dtype).tiny)
+        assert np.array_equal(image["Position"][normal], expected[normal], equal_nan=True)
+        np.testing.assert_allclose(
+            image["Position"][~normal], expected[~normal], rtol=0, atol=4 * np.finfo(expected.dtype).tiny
+        )
 
 
 @pytest.mark.parametrize("window", [1e-300, 1e-30, 1e30, 1e300])

@@ -60,7 +60,7 @@ def test_exact_strategies_match_the_exact_reference(case, precision):
     if not np.any(direction):
         return
     scene = vrc.Scene(mesh)
-    hits = scene.intersect(origin, direction, precision=precision)
+    hits = scene.intersect(origin[None], direction[None], precision=precision)
     # Two triangles hit at depths closer than the arithmetic resolves (two hits near a vertex,
     # on different edges) may go either way: accept any hit within 1e-12 (1e-5 for float32)
     # of the first one. Ties within 32 eps go to the lowest id.
@@ -100,7 +100,7 @@ def test_any_triangle_and_ray_gives_a_clean_answer(a, b, c, origin, direction, s
     if not any(direction):
         return
     mesh = pv.PolyData(np.array([a, b, c]), faces=[3, 0, 1, 2])
-    hits = vrc.Scene(mesh).intersect(origin, direction, strategy=strategy, precision=precision)
+    hits = vrc.Scene(mesh).intersect([origin], [direction], strategy=strategy, precision=precision)
     if hits["triangle_id"][0] < 0:
         assert np.isnan(hits["t"][0])
     else:

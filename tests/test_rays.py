@@ -1,0 +1,103 @@
+"""Scene.intersect's ray API (batch shapes, arrays, position and normal) and Scene.occluded,
+against independent references: numpy's geometry of the hit triangles and Open3D's
+RaycastingScene (cast_rays, test_occlusions)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import pyvista as pv
+
+import vtkraycast as vrc
+from vtkraycast.testing import bumpy_sphere
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return vrc.Scene(bumpy_sphere(4))
+
+
+def random_rays(n: int, seed: int = 0):
+    """Origins around the unit sphere's box, aimed at random points of it (some miss)."""
+    rng = np.random.default_rng(seed)
+    origins = rng.uniform(-2.5, 2.5, (n, 3))
+    targets = rng.uniform(-1.2, 1.2, (n, 3))
+    return origins, targets - origins
+
+
+def test_batch_shapes_broadcast(sphere):
+    origins = np.zeros((4, 5, 3)) + [0, 0, 3]
+    directions = np.array([0.01, 0.02, -1.0])
+    hits = sphere.intersect(origins, directions)
+    assert set(hits) == {"triangle_id", "cell_id", "t", "barycentric"}
+    assert hits["triangle_id"].shape == (4, 5) and hits["barycentric"].shape == (4, 5, 3)
+    flat = sphere.intersect(origins.reshape(-1, 3), np.tile(directions, (20, 1)))
+    np.testing.assert_array_equal(hits["triangle_id"].ravel(), flat["triangle_id"])
+    one = sphere.intersect([0, 0, 3], directions, arrays="t")
+    assert one["t"].shape == () and one["t"] == flat["t"][0]
+    with pytest.raises(ValueError, match="do not broadcast"):
+        sphere.intersect(np.zeros((4, 3)), np.ones((5, 3)))
+    with pytest.raises(ValueError, match=r"shape \(\.\.\., 3\)"):
+        sphere.intersect(np.zeros((4, 2)), np.ones((4, 2)))
+    with pytest.raises(ValueError, match="unknown ray array 'depth'"):
+        sphere.intersect(origins, directions, arrays=["depth"])
+
+
+def test_position_and_normal_are_the_hit_triangles(sphere):
+    origins, directions = random_rays(4000)
+    hits = sphere.intersect(origins, directions, arrays=["triangle_id", "t", "barycentric", "position", "normal"])
+    assert list(hits) == ["triangle_id", "t", "barycentric", "position", "normal"]
+    hit = hits["triangle_id"] >= 0
+    assert 0.3 < hit.mean() < 0.9
+    points, triangles = sphere.prepared.points, sphere.prepared.triangles
+    corners = points[triangles[hits["triangle_id"][hit]]]  # (h, 3, 3)
+    np.testing.assert_allclose(
+        hits["position"][hit], origins[hit] + hits["t"][hit, None] * directions[hit], rtol=0, atol=1e-12
+    )
+    np.testing.assert_allclose(
+        hits["position"][hit], np.einsum("hk,hkc->hc", hits["barycentric"][hit], corners), rtol=0, atol=1e-12
+    )
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    np.testing.assert_allclose(hits["normal"][hit], normal / np.linalg.norm(normal, axis=1)[:, None], atol=1e-12)
+    assert np.isnan(hits["position"][~hit]).all() and np.isnan(hits["normal"][~hit]).all()
+
+
+def test_against_open3d_cast_rays(sphere):
+    o3d = pytest.importorskip("open3d")
+    origins, directions = random_rays(20000, seed=1)
+    peer = o3d.t.geometry.RaycastingScene()
+    peer.add_triangles(
+        o3d.core.Tensor(sphere.prepared.points.astype(np.float32)),
+        o3d.core.Tensor(sphere.prepared.triangles.astype(np.uint32)),
+    )
+    rays = o3d.core.Tensor(np.hstack((origins, directions)).astype(np.float32))
+    theirs = peer.cast_rays(rays)
+    ours = sphere.intersect(origins, directions, arrays=["triangle_id", "t", "normal"])
+    ids = theirs["primitive_ids"].numpy().astype(np.int64)
+    ids[ids == np.iinfo(np.uint32).max] = -1
+    assert np.mean(ours["triangle_id"] == ids) > 0.999  # float32 rays: a few edge rays differ
+    both = (ours["triangle_id"] == ids) & (ids >= 0)
+    # (Open3D's float32 origins and directions: t off by their rounding, 1e-6 absolute here)
+    np.testing.assert_allclose(ours["t"][both], theirs["t_hit"].numpy()[both], rtol=1e-5, atol=2e-6)
+    np.testing.assert_allclose(ours["normal"][both], theirs["primitive_normals"].numpy()[both], atol=1e-5)
+    occluded = peer.test_occlusions(rays, tnear=0.0, tfar=0.6).numpy()
+    assert np.mean(sphere.occluded(origins, directions, tmax=0.6) == occluded) > 0.999
+
+
+@pytest.mark.parametrize("accel", ["bvh", "none"])
+@pytest.mark.parametrize("precision", ["float64", "float32"])
+def test_occluded_is_intersect_finding_a_hit_in_range(sphere, accel, precision):
+    origins, directions = random_rays(3000, seed=2)
+    for tmin, tmax in ((0.0, np.inf), (0.0, 0.5), (0.4, 0.8), (0.7, 0.7)):
+        found = sphere.intersect(origins, directions, tmin=tmin, tmax=tmax, accel=accel, precision=precision)
+        occluded = sphere.occluded(origins, directions, tmin=tmin, tmax=tmax, accel=accel, precision=precision)
+        assert occluded.dtype == bool and occluded.shape == (3000,)
+        np.testing.assert_array_equal(occluded, found["triangle_id"] >= 0)
+
+
+def test_occluded_from_inside_a_closed_mesh_is_always_true():
+    scene = vrc.Scene(pv.Sphere(theta_resolution=40, phi_resolution=40))
+    directions = np.random.default_rng(3).normal(size=(5000, 3))
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    assert scene.occluded(np.zeros(3), directions).all()
+    assert not scene.occluded(np.zeros(3), directions, tmax=0.4).any()  # radius 0.5
