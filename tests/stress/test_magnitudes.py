@@ -43,7 +43,7 @@ def test_one_triangle_at_every_decimal_magnitude(exponent, precision):
             np.testing.assert_allclose(hit["barycentric"][0], WEIGHTS, atol=RTOL[precision] * 8)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=150, deadline=None, derandomize=True)  # CI sees the same inputs every run
 @given(
     m=st.integers(-990, 990),
     n=st.integers(-990, 990),
@@ -80,7 +80,7 @@ def test_camera_casts_scale_exactly(exponent, precision):
     check_camera_scaling(exponent, precision, "auto")
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40, deadline=None, derandomize=True)
 @given(
     exponent=st.integers(-1020, 1000),
     precision=st.sampled_from(["float64", "float32"]),
@@ -99,6 +99,9 @@ def check_camera_scaling(exponent: int, precision: str, strategy: str, parallel:
     assert (np.asarray(base["TriangleId"]) >= 0).mean() > 0.3
     scaled_mesh = mesh.copy()
     scaled_mesh.points = np.ldexp(mesh.points, exponent)
+    nonzero = np.abs(scaled_mesh.points[mesh.points != 0])
+    if (nonzero < np.finfo(np.float64).tiny).any():
+        return  # the scaled mesh itself lost digits in the subnormals: not the same mesh
     f = math.ldexp(1.0, exponent)
     scaled_camera = camera.replace(
         eye=camera.eye * f, look_at=camera.look_at * f, d=camera.d * f, w=camera.w * f, h=camera.h * f
@@ -122,6 +125,9 @@ def check_camera_scaling(exponent: int, precision: str, strategy: str, parallel:
     ):
         assert np.array_equal(image["TriangleId"], base["TriangleId"])
         assert np.array_equal(image["Barycentric"], base["Barycentric"], equal_nan=True)
+        # (ids alone: most pixels settled by sure hits, without their rays)
+        ids = vrc.Scene(scaled_mesh).cast(scaled_camera, arrays=["TriangleId"], precision=precision, strategy=strategy)
+        assert np.array_equal(ids["TriangleId"], base["TriangleId"])
         assert np.array_equal(image["Depth"], np.ldexp(base["Depth"], exponent), equal_nan=True)
         # (a coordinate near 0 may scale into the subnormals, where it keeps fewer digits)
         expected = np.ldexp(base["Position"], exponent)
