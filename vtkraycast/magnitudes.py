@@ -44,11 +44,14 @@ class Scale(NamedTuple):
         """Raises if a point (ray origin, eye) is too far from the scene for ``real``."""
         if len(points) == 0:
             return
-        with np.errstate(over="ignore"):  # (an overflow is beyond every limit)
-            far = float(np.abs(points - self.centre).max())
         if LIMIT[real] - self.shift >= 1024:  # beyond float64: every finite point is within it
             return
         limit = math.ldexp(1.0, LIMIT[real] - self.shift)
+        flat = points.reshape(-1)  # (a bound first: one pass over contiguous memory is cheap)
+        if max(-float(flat.min()), float(flat.max())) + float(np.abs(self.centre).max()) <= limit:
+            return
+        with np.errstate(over="ignore"):  # (an overflow is beyond every limit)
+            far = max(float(np.abs(points[:, k] - self.centre[k]).max()) for k in range(3))
         if far > limit:
             raise ValueError(
                 f"{what} lies {far:.3g} from the scene's centre, beyond the {limit:.3g} that "
@@ -79,10 +82,13 @@ def direction_shifts(directions: np.ndarray, bounded: bool) -> int | np.ndarray:
     2**±SAFE already."""
     if len(directions) == 0:
         return 0
-    exponents = np.frexp(np.abs(directions).max(axis=1))[1]
-    high, low = int(exponents.max()), int(exponents.min())
+    longest = np.abs(directions[:, 0])  # each direction's largest component (columns: cheaper than axis=1)
+    np.maximum(longest, np.abs(directions[:, 1]), out=longest)
+    np.maximum(longest, np.abs(directions[:, 2]), out=longest)
+    high, low = exponent(float(longest.max())), exponent(float(longest.min()))
     if -SAFE <= low and high <= SAFE:
         return 0
+    exponents = np.frexp(longest)[1]
     if not bounded:
         return -exponents
     if high - low > 2 * SAFE:
