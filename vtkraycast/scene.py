@@ -137,7 +137,10 @@ class Scene:
         points, triangles = self._mesh.points, self._mesh.triangles
         self._core = _core.Scene(points, triangles, _threads(threads), bool(bvh))
         self._scale = scene_scale(self._core.point_bounds)
-        if self._scale.shift:  # rare: a scene beyond 2**±32 across, built again, scaled
+        # The box of the points the triangles use comes from the built scene; a scene beyond
+        # 2**±32 across (rare) is built again, scaled, rather than every build paying a
+        # pass over all triangles' points first.
+        if self._scale.shift:
             with np.errstate(over="ignore"):  # (only points no triangle uses can overflow)
                 points = np.ldexp(points, self._scale.shift)
             self._core = _core.Scene(points, triangles, _threads(threads), bool(bvh))
