@@ -22,6 +22,7 @@
 #include "kernel_moller_trumbore.hpp"
 #include "kernel_plane.hpp"
 #include "kernel_watertight.hpp"
+#include "ray_extent.hpp"
 #include "render.hpp"
 
 namespace nb = nanobind;
@@ -352,6 +353,20 @@ NB_MODULE(_core, m) {
             },
             "values"_a, "out"_a, "per_point"_a,
             "Gathers a mesh array at the hits into `out`: a point array interpolated, a cell array by the hit cell.");
+    m.def(
+        "ray_extent",
+        [](Points origins, Points directions, int threads) {
+            if (origins.shape(0) != directions.shape(0)) throw std::invalid_argument("origins and directions differ in length");
+            vrc::RayExtent e;
+            {
+                nb::gil_scoped_release release;
+                e = vrc::ray_extent(origins.data(), directions.data(), origins.shape(0), resolve_threads(threads));
+            }
+            return nb::make_tuple(e.finite, e.nonzero, e.origin_min, e.origin_max, e.longest_min, e.longest_max);
+        },
+        "origins"_a, "directions"_a, "threads"_a,
+        "(finite, nonzero directions, least and greatest origin component, least and greatest of the directions' "
+        "largest |component|) in one parallel pass.");
     m.def("cast", &cast, "scene"_a, "request"_a,
           "Casts a request's rays (released GIL, all outputs written by the workers). Returns False if aborted.");
 }

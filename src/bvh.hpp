@@ -10,6 +10,7 @@
 #include "exact_sign.hpp"
 #include "geometry.hpp"
 #include "memory.hpp"
+#include "wide_bvh.hpp"
 
 namespace vrc {
 
@@ -55,6 +56,7 @@ struct Scene {
     std::size_t input_points = 0;     ///< points of the input mesh (point fields have a row each)
     std::vector<Node> nodes;          ///< nodes[0] is the root; empty when there are no triangles
     CameraTree camera;                ///< the hierarchy as camera casts go through it
+    std::vector<WideNode> wide;       ///< the hierarchy as single rays go through it
     /// Boxes are stored relative to this point (the centre of the triangles' bounding box), so
     /// their single precision resolves the scene's own size, wherever it lies in the world.
     double anchor[3] = {0, 0, 0};
@@ -77,7 +79,7 @@ struct Scene {
     [[nodiscard]] std::size_t memory_bytes() const {
         return points.size() * sizeof(double) + triangles.size() * sizeof(uint32_t) +
                prim_ids.size() * sizeof(uint32_t) + nodes.size() * sizeof(Node) +
-               camera.nodes.size() * sizeof(CameraTree::Link) +
+               camera.nodes.size() * sizeof(CameraTree::Link) + wide.size() * sizeof(WideNode) +
                (camera.leaf_offsets.size() + camera.leaf_points.size()) * sizeof(uint32_t) + scratch->bytes();
     }
 };

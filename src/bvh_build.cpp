@@ -615,42 +615,6 @@ void build_subtree(Ref* refs, uint32_t* index, std::vector<Node>& nodes, uint32_
     build_subtree(refs, index, nodes, pair + 1, right);
 }
 
-// relative_down / relative_up of geometry.hpp, with std::nextafter (a libm call, taken for
-// about half the coordinates) replaced by steps on the bits: the same values for every
-// non-NaN input (checked against geometry.hpp on edge cases and random inputs).
-inline float step_down(float f) {  // std::nextafter(f, -inf)
-    if (f == 0.0f) return -std::numeric_limits<float>::denorm_min();
-    if (f == -std::numeric_limits<float>::infinity()) return f;
-    uint32_t b;
-    std::memcpy(&b, &f, sizeof b);
-    b = f > 0.0f ? b - 1 : b + 1;
-    std::memcpy(&f, &b, sizeof f);
-    return f;
-}
-inline float step_up(float f) {  // std::nextafter(f, +inf)
-    if (f == 0.0f) return std::numeric_limits<float>::denorm_min();
-    if (f == std::numeric_limits<float>::infinity()) return f;
-    uint32_t b;
-    std::memcpy(&b, &f, sizeof b);
-    b = f > 0.0f ? b + 1 : b - 1;
-    std::memcpy(&f, &b, sizeof f);
-    return f;
-}
-inline float fast_relative_down(double x, double a) {
-    const double d = x - a, bv = x - d, err = (x - (d + bv)) + (bv - a);
-    float f = static_cast<float>(d);
-    if (static_cast<double>(f) > d) f = step_down(f);
-    if (static_cast<double>(f) - d > err) f = step_down(f);
-    return f;
-}
-inline float fast_relative_up(double x, double a) {
-    const double d = x - a, bv = x - d, err = (x - (d + bv)) + (bv - a);
-    float f = static_cast<float>(d);
-    if (static_cast<double>(f) < d) f = step_up(f);
-    if (static_cast<double>(f) - d < err) f = step_up(f);
-    return f;
-}
-
 /// float lo/hi of a point relative to the anchor (rounded outward).
 struct PointBox {
     float lo[4];
@@ -707,8 +671,8 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
             const double* p = points + 3 * std::size_t(i);
             double d2 = 0;
             for (int k = 0; k < 3; ++k) {
-                pbox[i].lo[k] = fast_relative_down(p[k], scene.anchor[k]);
-                pbox[i].hi[k] = fast_relative_up(p[k], scene.anchor[k]);
+                pbox[i].lo[k] = relative_down(p[k], scene.anchor[k]);
+                pbox[i].hi[k] = relative_up(p[k], scene.anchor[k]);
                 d2 += (p[k] - scene.sphere_center[k]) * (p[k] - scene.sphere_center[k]);
             }
             pbox[i].lo[3] = pbox[i].hi[3] = 0.0f;
@@ -883,6 +847,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     });
     order_points(scene, points, n_points);
     build_camera_tree(scene);
+    scene.wide = collapse_to_wide(scene);
     return scene;
 }
 
@@ -1061,6 +1026,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     }
     order_points(scene, points, n_points);
     build_camera_tree(scene);
+    scene.wide = collapse_to_wide(scene);
     return scene;
 }
 

@@ -177,13 +177,13 @@ class ProjectedScene {
         // the smallest normal float, which covers a subnormal depth's rounding).
         projection_margin_ = map_.margin + (c.parallel ? 16 * kEps * parallel_size : 0);
         const double margin = projection_margin_ + 0x1p-21 * double(std::max(c.nx, c.ny) + 2);
-        margin_ = up(margin);
-        slack_ = std::max(up(2 * depth_slack_), std::numeric_limits<float>::min());
-        near_ = -up(-c.near), far_ = up(c.far);  // rounded outward
+        margin_ = round_up(margin);
+        slack_ = std::max(round_up(2 * depth_slack_), std::numeric_limits<float>::min());
+        near_ = -round_up(-c.near), far_ = round_up(c.far);  // rounded outward
         // A triangle's depths must clear the camera's range by more than the kernel's and
         // the ray's t range's roundings (tiny beside 2^-20) for its hit to be sure (`surely_hit`).
-        sure_near_ = up(c.near + std::fabs(c.near) * 0x1p-20 + slack_);
-        sure_far_ = std::isinf(c.far) ? HUGE_VALF : -up(-(c.far - std::fabs(c.far) * 0x1p-20 - slack_));
+        sure_near_ = round_up(c.near + std::fabs(c.near) * 0x1p-20 + slack_);
+        sure_far_ = std::isinf(c.far) ? HUGE_VALF : -round_up(-(c.far - std::fabs(c.far) * 0x1p-20 - slack_));
 #if defined(__SSE4_1__)
         const float nx = float(c.nx), ny = float(c.ny);
         margin4_ = _mm_setr_ps(-margin_, margin_, -margin_, margin_);
@@ -643,12 +643,6 @@ class ProjectedScene {
         }
         std::sort_heap(subtrees_.begin(), subtrees_.end(), smaller);
         std::reverse(subtrees_.begin(), subtrees_.end());  // largest first
-    }
-
-    /// x rounded up to single precision.
-    static float up(double x) {
-        const float f = float(x);
-        return double(f) < x ? std::nextafter(f, HUGE_VALF) : f;
     }
 
     const Scene& scene_;

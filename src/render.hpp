@@ -17,6 +17,7 @@
 #include <type_traits>
 
 #include "traverse.hpp"
+#include "traverse_wide.hpp"
 #include "bin_triangles.hpp"
 #include "outputs.hpp"
 #include "traverse_tile.hpp"
@@ -131,11 +132,11 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
             if (context.any_hit)
                 store(k, ray,
                       kBruteForce ? brute_force_hit<Kernel, Real, kAny>(scene, ray, context)
-                                  : closest_hit<Kernel, Real, kAny>(scene, ray, context));
+                                  : trace_ray<Kernel, Real, kAny>(scene, ray, context));
             else
                 store(k, ray,
                       kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, context)
-                                  : closest_hit<Kernel, Real>(scene, ray, context));
+                                  : trace_ray<Kernel, Real>(scene, ray, context));
         });
     };
     // Camera rays go a tile at a time (traverse_tile.hpp), through the BVH or, on a flat

@@ -1,5 +1,5 @@
-// Closest-hit traversal of the BVH, templated on the intersection kernel and precision so
-// every strategy shares one loop.
+// What every traversal shares: the conservative box test, the closest-hit rule with its
+// ties, and the seed's brute force.
 #pragma once
 
 #include <cmath>
@@ -99,7 +99,7 @@ inline void test_triangle(const Kernel& kernel, const Scene& scene, uint32_t i, 
 enum class HitPolicy { closest, any };
 
 /// The seed lecture's method (accel = "none"): the whole model's bounding sphere, then its
-/// bounding box, then every triangle. Ties go to the lowest input triangle index, as below.
+/// bounding box, then every triangle. Ties go to the lowest input triangle index.
 template <template <class> class Kernel, class Real, HitPolicy kPolicy = HitPolicy::closest>
 Hit<Real> brute_force_hit(const Scene& scene, const Ray& ray, const CastContext& context) {
     Hit<Real> hit;
@@ -113,54 +113,6 @@ Hit<Real> brute_force_hit(const Scene& scene, const Ray& ray, const CastContext&
         if (kPolicy == HitPolicy::any && hit.found()) break;
     }
     return hit;
-}
-
-/// Closest hit along `ray` with ray.tmin <= t <= ray.tmax. Equal `t` goes to the lowest
-/// input triangle index, so duplicates and coplanar overlaps have one deterministic winner.
-/// With HitPolicy::any, the first hit found in the range instead.
-template <template <class> class Kernel, class Real, HitPolicy kPolicy = HitPolicy::closest>
-Hit<Real> closest_hit(const Scene& scene, const Ray& ray, const CastContext& context) {
-    Hit<Real> hit;
-    if (scene.nodes.empty()) return hit;
-    const BoxTester boxes(ray, scene.anchor);
-    if (boxes.enter(scene.nodes[0].box, ray.tmin, ray.tmax) == std::numeric_limits<double>::infinity()) return hit;
-    const Kernel<Real> kernel(ray, context);
-    double bound = ray.tmax;
-    struct Pending {
-        uint32_t node;
-        double enter;
-    } stack[128];
-    int top = 0;
-    uint32_t current = 0;
-    for (;;) {
-        const Node& node = scene.nodes[current];
-        if (node.is_leaf()) {
-            for (uint32_t i = node.index, end = node.index + node.count; i < end; ++i) {
-                test_triangle(kernel, scene, i, ray.tmin, bound, hit);
-                if (kPolicy == HitPolicy::any && hit.found()) return hit;
-            }
-        } else {
-            const uint32_t left = node.index;
-            double tl = boxes.enter(scene.nodes[left].box, ray.tmin, bound);
-            double tr = boxes.enter(scene.nodes[left + 1].box, ray.tmin, bound);
-            constexpr double kMiss = std::numeric_limits<double>::infinity();
-            if (tl != kMiss || tr != kMiss) {
-                uint32_t first = left, second = left + 1;
-                if (tr < tl) {
-                    std::swap(first, second);
-                    std::swap(tl, tr);
-                }
-                if (tr != kMiss) stack[top++] = {second, tr};
-                current = first;
-                continue;
-            }
-        }
-        do {  // pop, skipping nodes that now start beyond the closest hit
-            if (top == 0) return hit;
-            --top;
-        } while (stack[top].enter > bound);
-        current = stack[top].node;
-    }
 }
 
 }  // namespace vrc

@@ -40,15 +40,19 @@ class Scale(NamedTuple):
     centre: np.ndarray
     size: float
 
-    def check_origins(self, points: np.ndarray, real: type, what: str) -> None:
-        """Raises if a point (ray origin, eye) is too far from the scene for ``real``."""
+    def check_origins(
+        self, points: np.ndarray, real: type, what: str, *, extent: tuple[float, float] | None = None
+    ) -> None:
+        """Raises if a point (ray origin, eye) is too far from the scene for ``real``.
+        ``extent``: the least and greatest coordinate of ``points``, when known."""
         if len(points) == 0:
             return
         if LIMIT[real] - self.shift >= 1024:  # beyond float64: every finite point is within it
             return
         limit = math.ldexp(1.0, LIMIT[real] - self.shift)
-        flat = points.reshape(-1)  # (a bound first: one pass over contiguous memory is cheap)
-        if max(-float(flat.min()), float(flat.max())) + float(np.abs(self.centre).max()) <= limit:
+        if extent is None:  # (a bound first: one pass over contiguous memory is cheap)
+            extent = float(points.min()), float(points.max())
+        if max(-extent[0], extent[1]) + float(np.abs(self.centre).max()) <= limit:
             return
         with np.errstate(over="ignore"):  # (an overflow is beyond every limit)
             far = max(float(np.abs(points[:, k] - self.centre[k]).max()) for k in range(3))
@@ -75,19 +79,24 @@ def scene_scale(bounds) -> Scale:
     return Scale(-(exponent(half) + 1), centre, size)
 
 
-def direction_shifts(directions: np.ndarray, bounded: bool) -> int | np.ndarray:
+def direction_shifts(
+    directions: np.ndarray, bounded: bool, *, extent: tuple[float, float] | None = None
+) -> int | np.ndarray:
     """Powers of two that bring each direction's largest component to [0.5, 1): per ray,
     or one for all when ``bounded`` (tmin, tmax are one pair for all rays), which then must
     not differ in length by more than 2**(2 SAFE). 0 when every direction is within
-    2**±SAFE already."""
+    2**±SAFE already. ``extent``: the least and greatest largest component, when known."""
     if len(directions) == 0:
         return 0
-    longest = np.abs(directions[:, 0])  # each direction's largest component (columns: cheaper than axis=1)
-    np.maximum(longest, np.abs(directions[:, 1]), out=longest)
-    np.maximum(longest, np.abs(directions[:, 2]), out=longest)
-    high, low = exponent(float(longest.max())), exponent(float(longest.min()))
+    longest = None
+    if extent is None:
+        longest = _longest(directions)
+        extent = longest.min(), longest.max()
+    high, low = exponent(float(extent[1])), exponent(float(extent[0]))
     if -SAFE <= low and high <= SAFE:
         return 0
+    if longest is None:
+        longest = _longest(directions)
     exponents = np.frexp(longest)[1]
     if not bounded:
         return -exponents
@@ -97,6 +106,14 @@ def direction_shifts(directions: np.ndarray, bounded: bool) -> int | np.ndarray:
             f"(here 2**{high - low}); normalise them, or cast them in separate calls"
         )
     return -high
+
+
+def _longest(directions: np.ndarray) -> np.ndarray:
+    """Each direction's largest |component| (columns: cheaper than axis=1)."""
+    longest = np.abs(directions[:, 0])
+    np.maximum(longest, np.abs(directions[:, 1]), out=longest)
+    np.maximum(longest, np.abs(directions[:, 2]), out=longest)
+    return longest
 
 
 def shift_lengths(values: np.ndarray, shift: int | np.ndarray, what: str, *, distance: bool = True) -> None:

@@ -73,9 +73,10 @@ def _shifted(bound: float, shift: int) -> float:
         return math.inf
 
 
-def _ray_batch(origins: Any, directions: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+def _ray_batch(origins: Any, directions: Any, threads: int) -> tuple[np.ndarray, np.ndarray, tuple[int, ...], tuple]:
     """Origins and directions of shapes (..., 3), broadcast against each other, as (n, 3)
-    float64 rows, with the batch shape the outputs take."""
+    float64 rows, with the batch shape the outputs take and their extent (_core.ray_extent:
+    least and greatest origin component, least and greatest direction length in max norm)."""
     arrays = []
     for value, name in ((origins, "origins"), (directions, "directions")):
         a = np.asarray(value)
@@ -90,15 +91,16 @@ def _ray_batch(origins: Any, directions: Any) -> tuple[np.ndarray, np.ndarray, t
         raise ValueError(
             f"origins {arrays[0].shape} and directions {arrays[1].shape} do not broadcast against each other"
         ) from None
-    rows = []
-    for a, name in zip(arrays, ("origins", "directions")):
-        a = np.ascontiguousarray(np.broadcast_to(a, (*shape, 3)).reshape(-1, 3), dtype=np.float64)
-        if not np.isfinite(a).all():
-            raise ValueError(f"{name} must be finite; row {int(np.flatnonzero(~np.isfinite(a).all(1))[0])} is not")
-        rows.append(a)
-    if len(rows[1]) and not (np.abs(rows[1]).max(axis=1) > 0).all():
+    o, d = (np.ascontiguousarray(np.broadcast_to(a, (*shape, 3)).reshape(-1, 3), dtype=np.float64) for a in arrays)
+    finite, nonzero, *extent = _core.ray_extent(o, d, threads)
+    if not finite:
+        for a, name in ((o, "origins"), (d, "directions")):
+            bad = np.flatnonzero(~np.isfinite(a).all(1))
+            if len(bad):
+                raise ValueError(f"{name} must be finite; row {int(bad[0])} is not")
+    if not nonzero:
         raise ValueError("directions must be non-zero")
-    return rows[0], rows[1], shape
+    return o, d, shape, tuple(extent)
 
 
 class Scene:
@@ -406,7 +408,7 @@ class Scene:
         shifts k (lengths) and j (directions): t in the core is 2**(k - j) t."""
         if not self.has_bvh and _accel(accel) != "none":
             raise ValueError('this scene was built with bvh=False: intersect needs accel="none" (or bvh=True)')
-        o, d, shape = _ray_batch(origins, directions)
+        o, d, shape, (o_min, o_max, d_min, d_max) = _ray_batch(origins, directions, _threads(threads))
         tmin, tmax = float(tmin), float(tmax)
         if math.isnan(tmin) or math.isnan(tmax) or tmin > tmax:
             raise ValueError(f"need tmin <= tmax, got tmin={tmin}, tmax={tmax}")
@@ -415,9 +417,9 @@ class Scene:
                 f"tmin must be >= 0, got {tmin}: hits behind a ray's origin are not cast "
                 "(reverse the direction, or move the origin back, to find them)"
             )
-        self._scale.check_origins(o, _precision(precision), "a ray origin")
+        self._scale.check_origins(o, _precision(precision), "a ray origin", extent=(o_min, o_max))
         k = self._scale.shift
-        j = direction_shifts(d, bounded=(tmin, tmax) != (0.0, math.inf))
+        j = direction_shifts(d, bounded=(tmin, tmax) != (0.0, math.inf), extent=(d_min, d_max))
         request = self._request(strategy, precision, accel, threads, backface_culling)
         request.origins = np.ldexp(o, k) if k else o
         request.directions = np.ldexp(d, np.reshape(j, (-1, 1))) if np.any(j) else d

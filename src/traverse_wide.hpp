@@ -1,0 +1,186 @@
+// Single-ray traversal of the four-wide BVH (wide_bvh.hpp): the four children's boxes in
+// the lanes of one SSE register, in single precision with bounds that never miss a box the
+// ray enters; rays beyond single precision's reach test the lanes in double instead.
+#pragma once
+
+#include <immintrin.h>
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include <type_traits>
+
+#include "exact_sign.hpp"
+#include "kernel_watertight.hpp"
+#include "traverse.hpp"
+#include "triangle_filter.hpp"
+#include "wide_bvh.hpp"
+
+namespace vrc {
+
+/// Slab tests of a wide node's four boxes in float. Conservative as in Ize, "Robust BVH Ray
+/// Traversal" (JCGT 2013): the origin relative to the anchor is rounded up where that makes
+/// a slab distance smaller and down where larger, so the slab distances (b - o) / d are
+/// computed from exact differences with four roundings (d to float, 1 / d, b - o, the
+/// product); the far distance is then widened by 2^-20 > 2 gamma(4). NaN (origin on the
+/// slab of a zero direction component) leaves a bound unchanged.
+class FloatLanes {
+   public:
+    /// False when the ray is beyond what float slab distances hold without overflow (origin
+    /// more than 2^60 from the anchor, a direction component nonzero but below 2^-60 of the
+    /// largest, which is in [1, 2)).
+    bool setup(const Ray& ray, const double anchor[3]) {
+        for (int k = 0; k < 3; ++k) {
+            double hi, lo;
+            exact::two_diff(ray.org[k], anchor[k], hi, lo);
+            const double d = ray.dir[k];
+            if (!(std::fabs(hi) <= 0x1p60) || (d != 0 && std::fabs(d) < 0x1p-60)) return false;
+            const bool negative = std::signbit(d);
+            near_[k] = negative ? 3 + k : k;
+            far_[k] = negative ? k : 3 + k;
+            // d > 0: the near slab's distance (lo - o) / d is smallest with o rounded up,
+            // the far one's largest with o rounded down; d < 0 the other way round.
+            const float up = round_toward(hi, lo, true), down = round_toward(hi, lo, false);
+            org_near_[k] = _mm_set1_ps(negative ? down : up);
+            org_far_[k] = _mm_set1_ps(negative ? up : down);
+            inv_[k] = _mm_set1_ps(1.0f / static_cast<float>(d));
+        }
+        tmin_ = _mm_set1_ps(round_down(ray.tmin));
+        return true;
+    }
+
+    /// Lanes whose box overlaps [tmin, bound], as bits, and their entry distances (lower
+    /// bounds of the exact ones).
+    [[gnu::always_inline]] unsigned test(const WideNode& node, double bound, double enter[4]) const {
+        __m128 t0 = tmin_, t1 = _mm_set1_ps(round_up(bound));
+        for (int k = 0; k < 3; ++k) {
+            const __m128 tn = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(node.bounds[near_[k]]), org_near_[k]), inv_[k]);
+            const __m128 tf = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(node.bounds[far_[k]]), org_far_[k]), inv_[k]);
+            t0 = _mm_max_ps(tn, t0);  // (the second operand where either is NaN)
+            t1 = _mm_min_ps(tf, t1);
+        }
+        t1 = _mm_mul_ps(t1, _mm_set1_ps(kWiden));
+        alignas(16) float entry[4];
+        _mm_store_ps(entry, t0);
+        for (int c = 0; c < 4; ++c) enter[c] = entry[c];
+        return unsigned(_mm_movemask_ps(_mm_cmple_ps(t0, t1)));
+    }
+
+    /// Whether a box entered at `enter` (as test() gave it) lies wholly beyond `bound`.
+    static bool beyond(double enter, double bound) { return enter > bound * (1 + 0x1p-19); }
+
+   private:
+    static constexpr float kWiden = 1.0f + 0x1p-20f;
+    /// hi + lo (a two-difference) rounded to a float above or below it.
+    static float round_toward(double hi, double lo, bool up) {
+        const float f = static_cast<float>(hi);
+        const double g = f;
+        if (up && (g < hi || (g == hi && lo > 0))) return next_float(f, true);
+        if (!up && (g > hi || (g == hi && lo < 0))) return next_float(f, false);
+        return f;
+    }
+    int near_[3], far_[3];
+    __m128 org_near_[3], org_far_[3], inv_[3], tmin_;
+};
+
+/// The same slab tests in double, lane by lane (BoxTester): any ray.
+class DoubleLanes {
+   public:
+    explicit DoubleLanes(const Ray& ray, const double anchor[3]) : boxes_(ray, anchor), tmin_(ray.tmin) {}
+    unsigned test(const WideNode& node, double bound, double enter[4]) const {
+        unsigned mask = 0;
+        for (int c = 0; c < 4; ++c) {
+            Box box;
+            for (int k = 0; k < 3; ++k) {
+                box.lo[k] = node.bounds[k][c];
+                box.hi[k] = node.bounds[3 + k][c];
+            }
+            enter[c] = boxes_.enter(box, tmin_, bound);
+            if (enter[c] != std::numeric_limits<double>::infinity()) mask |= 1u << c;
+        }
+        return mask;
+    }
+    static bool beyond(double enter, double bound) { return enter > bound; }
+
+   private:
+    BoxTester boxes_;
+    double tmin_;
+};
+
+/// Closest hit (or with HitPolicy::any, any hit) along `ray` in [tmin, tmax] through the
+/// wide BVH, children visited nearest first. Ties go to the lowest input triangle index
+/// (test_triangle), so the answer is the binary traversal's, whatever the order. The
+/// watertight kernel meets only the triangles TriangleFilter leaves (its verdicts are that
+/// kernel's); the other strategies meet every triangle, so their own errors stay theirs.
+template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Lanes>
+Hit<Real> wide_hit(const Scene& scene, const Ray& ray, const Kernel<Real>& kernel, const Lanes& lanes) {
+    constexpr bool kFiltered = std::is_same_v<Kernel<Real>, Watertight<Real>>;
+    struct NoFilter {
+        explicit NoFilter(const Ray&) {}
+    };
+    const std::conditional_t<kFiltered, TriangleFilter, NoFilter> filter(ray);
+    Hit<Real> hit;
+    double bound = ray.tmax;
+    struct Pending {
+        uint32_t child, count;
+        double enter;
+    } stack[4 * 128];
+    int top = 0;
+    uint32_t node_index = 0;
+    for (;;) {
+        const WideNode& node = scene.wide[node_index];
+        double enter[4];
+        unsigned mask = lanes.test(node, bound, enter);
+        // Push the entered lanes farthest first (a few compares: at most four), so the
+        // nearest is popped first.
+        int order[4], n = 0;
+        for (; mask; mask &= mask - 1) {
+            const int c = __builtin_ctz(mask);
+            int at = n++;
+            for (; at > 0 && enter[order[at - 1]] < enter[c]; --at) order[at] = order[at - 1];
+            order[at] = c;
+        }
+        for (int i = 0; i < n; ++i) {
+            const int c = order[i];
+            if (node.count[c] == 0) __builtin_prefetch(&scene.wide[node.child[c]]);
+            stack[top++] = {node.child[c], node.count[c], enter[c]};
+        }
+        for (;;) {  // pop: leaves are tested here, nodes go back to the top of the loop
+            do {
+                if (top == 0) return hit;
+                --top;
+            } while (Lanes::beyond(stack[top].enter, bound));
+            const Pending& next = stack[top];
+            if (next.count == 0) {
+                node_index = next.child;
+                break;
+            }
+            if constexpr (kFiltered) {
+                for (uint32_t i = next.child, end = next.child + next.count; i < end; i += 4) {
+                    for (unsigned m = filter.candidates(scene, i, std::min(4u, end - i), ray.tmin, bound); m; m &= m - 1) {
+                        test_triangle(kernel, scene, i + __builtin_ctz(m), ray.tmin, bound, hit);
+                        if (kPolicy == HitPolicy::any && hit.found()) return hit;
+                    }
+                }
+            } else {
+                for (uint32_t i = next.child, end = next.child + next.count; i < end; ++i) {
+                    test_triangle(kernel, scene, i, ray.tmin, bound, hit);
+                    if (kPolicy == HitPolicy::any && hit.found()) return hit;
+                }
+            }
+        }
+    }
+}
+
+/// The traversal for one ray: float lanes when its numbers allow, double lanes otherwise.
+template <template <class> class Kernel, class Real, HitPolicy kPolicy = HitPolicy::closest>
+Hit<Real> trace_ray(const Scene& scene, const Ray& ray, const CastContext& context) {
+    if (scene.wide.empty()) return Hit<Real>{};
+    const Kernel<Real> kernel(ray, context);
+    FloatLanes fast;
+    if (fast.setup(ray, scene.anchor)) return wide_hit<Kernel, Real, kPolicy>(scene, ray, kernel, fast);
+    return wide_hit<Kernel, Real, kPolicy>(scene, ray, kernel, DoubleLanes(ray, scene.anchor));
+}
+
+}  // namespace vrc
