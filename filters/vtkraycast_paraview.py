@@ -109,12 +109,13 @@ def _release_scenes() -> None:
 @smproperty.xml(
     '<Documentation short_help="Ray casts a mesh into a geometry buffer image.">'
     "Casts one ray per pixel of the camera into the input (polygons and strips are "
-    "triangulated; other datasets contribute their outer surface) and writes, per pixel, "
+    "triangulated; other datasets contribute their outer surface; the blocks of a composite "
+    "dataset are cast as one scene, with CompositeIndex) and writes, per pixel, "
     "the first triangle hit, its barycentric coordinates, the depth and the input's fields "
     "at the hit (vtkraycast).</Documentation>"
 )
 @smproperty.input(name="Input", port_index=0)
-@smdomain.datatype(dataTypes=["vtkDataSet"], composite_data_supported=False)
+@smdomain.datatype(dataTypes=["vtkDataSet", "vtkCompositeDataSet"], composite_data_supported=True)
 class RayCast(vrc.RayCastFilter):
     """``vrc.RayCastFilter`` with the camera given by ParaView properties.
 

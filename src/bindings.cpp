@@ -130,11 +130,11 @@ struct Request {
     bool any_hit = false;  // rays only: whether anything lies in [tmin, tmax], found the quickest way
     int threads = 0;
     std::optional<nb::callable> progress;
-    std::optional<IdsOut> triangle_id, cell_id;
+    std::optional<IdsOut> triangle_id, cell_id, composite_index;
     std::optional<MaskOut> valid;
     std::optional<AnyArray> depth, barycentric, position, normal;
     std::optional<Triangles> mesh_triangles;
-    std::optional<CellMap> cell_ids, surface_cell_ids;
+    std::optional<CellMap> cell_ids, surface_cell_ids, composite_ids;
     std::vector<FieldRequest> fields;
 };
 
@@ -185,6 +185,7 @@ vrc::Outputs<Real> outputs(const vrc::Scene& scene, const Request& q, std::size_
     };
     out.triangle_id = ids(q.triangle_id, "triangle_id");
     out.cell_id = ids(q.cell_id, "cell_id");
+    out.composite_index = ids(q.composite_index, "composite_index");
     if (q.valid) {
         if (q.valid->shape(0) != n) throw std::invalid_argument("valid must have one row per ray");
         out.valid = q.valid->data();
@@ -199,6 +200,7 @@ vrc::Outputs<Real> outputs(const vrc::Scene& scene, const Request& q, std::size_
         return a->data();
     };
     if (out.cell_id) out.cell_ids = per_triangle(q.cell_ids, "cell_ids");
+    if (out.composite_index) out.composite_ids = per_triangle(q.composite_ids, "composite_ids");
     for (const FieldRequest& f : q.fields) {
         const vrc::Dtype type = dtype_of(f.values.dtype());
         if (f.out.dtype() != f.values.dtype()) throw std::invalid_argument("a field's output must be of its input's type");
@@ -338,6 +340,7 @@ NB_MODULE(_core, m) {
         .def_rw("progress", &Request::progress, nb::arg().none())
         .def_rw("triangle_id", &Request::triangle_id, nb::arg().none())
         .def_rw("cell_id", &Request::cell_id, nb::arg().none())
+        .def_rw("composite_index", &Request::composite_index, nb::arg().none())
         .def_rw("valid", &Request::valid, nb::arg().none())
         .def_rw("depth", &Request::depth, nb::arg().none())
         .def_rw("barycentric", &Request::barycentric, nb::arg().none())
@@ -345,6 +348,7 @@ NB_MODULE(_core, m) {
         .def_rw("normal", &Request::normal, nb::arg().none())
         .def_rw("mesh_triangles", &Request::mesh_triangles, nb::arg().none())
         .def_rw("cell_ids", &Request::cell_ids, nb::arg().none())
+        .def_rw("composite_ids", &Request::composite_ids, nb::arg().none())
         .def_rw("surface_cell_ids", &Request::surface_cell_ids, nb::arg().none())
         .def(
             "add_field",

@@ -37,6 +37,7 @@ template <class Real>
 struct Outputs {
     int64_t* triangle_id = nullptr;  ///< input triangle index, -1 on a miss
     int64_t* cell_id = nullptr;      ///< input cell index, -1 on a miss
+    int64_t* composite_index = nullptr;  ///< flat index of the hit leaf of a composite input, -1 on a miss
     uint8_t* valid = nullptr;        ///< 1 on a hit, 0 on a miss (vtkValidPointMask)
     Real* depth = nullptr;           ///< camera depth (or t for array rays), NaN on a miss
     Real* barycentric = nullptr;     ///< (n, 3) weights of the triangle's points, NaN on a miss
@@ -45,6 +46,7 @@ struct Outputs {
     std::vector<Field> fields;
     const uint32_t* mesh_triangles = nullptr;    ///< (input triangles, 3) input point ids (point fields)
     const int64_t* cell_ids = nullptr;           ///< input triangle -> input cell (CellId)
+    const int64_t* composite_ids = nullptr;      ///< input triangle -> leaf (CompositeIndex)
     const int64_t* surface_cell_ids = nullptr;   ///< input triangle -> row of the cell arrays
 
     /// Whether an output needs the hit's exact depth or weights (else a hit known by its
@@ -94,6 +96,7 @@ class OutputWriter {
     void misses(std::size_t k, std::size_t n) const {
         if (out_.triangle_id) std::fill_n(out_.triangle_id + k, n, int64_t(-1));
         if (out_.cell_id) std::fill_n(out_.cell_id + k, n, int64_t(-1));
+        if (out_.composite_index) std::fill_n(out_.composite_index + k, n, int64_t(-1));
         if (out_.valid) std::memset(out_.valid + k, 0, n);
         if (out_.depth) std::fill_n(out_.depth + k, n, kNaN);
         for (Real* triples : {out_.barycentric, out_.position, out_.normal})
@@ -107,6 +110,7 @@ class OutputWriter {
         const uint32_t input = scene_.prim_ids[prim];
         if (out_.triangle_id) out_.triangle_id[k] = int64_t(input);
         if (out_.cell_id) out_.cell_id[k] = out_.cell_ids[input];
+        if (out_.composite_index) out_.composite_index[k] = out_.composite_ids[input];
         if (out_.valid) out_.valid[k] = 1;
         if (out_.normal) unit_normal(prim, out_.normal + 3 * k);
         for (const Field& f : out_.fields)

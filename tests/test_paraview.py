@@ -161,8 +161,19 @@ def _block(path: Path) -> None:
     grid.save(path)
 
 
+def _ball(path: Path) -> None:
+    """A sphere inside the torus's hole, sharing the torus's Temperature, with a cell
+    array of its own: the composite case's second block."""
+    mesh = pv.Sphere(radius=0.45, center=(0.1, 0.0, 0.05), theta_resolution=20, phi_resolution=14)
+    mesh.point_data.clear()
+    mesh.point_data["Temperature"] = mesh.points[:, 2] * 3.0
+    mesh.cell_data["Patch"] = (np.arange(mesh.n_cells) % 5).astype(np.int32)
+    mesh.save(path)
+
+
 def _plan(tmp: Path) -> dict:
     _torus(tmp / "torus.vtp")
+    _ball(tmp / "ball.vtp")
     _block(tmp / "block.vtu")
     torus = str(tmp / "torus.vtp")
     return {
@@ -198,6 +209,7 @@ def _plan(tmp: Path) -> dict:
             },
             "block": {"path": str(tmp / "block.vtu"), "cast": {**TORUS_CAMERA, "Strategy": "plane"}},
         },
+        "composite": {"paths": [torus, str(tmp / "ball.vtp")], "cast": TORUS_CAMERA},
         "errors": {
             "path": torus,
             "cast": {**TORUS_CAMERA, "Resolution": [16, 12]},
@@ -318,6 +330,18 @@ def test_arrays_equal_vrc_cast_on_files(pvbatch_run):
     assert options["Depth"].dtype == np.float32 and options["Position"].shape == (80 * 60, 3)
     assert list(pv.read(tmp / "torus_parallel.vti").point_data.keys())[-1] == "vtkValidPointMask"
     assert report["casts"]["torus_parallel"]["spacing"][0] == pytest.approx(2.4 / 60)  # world space
+
+
+def test_composite_input_is_one_scene_as_vrc_cast_of_a_multiblock(pvbatch_run):
+    report, tmp, plan, _ = pvbatch_run
+    spec = plan["composite"]
+    got = pv.read(tmp / "composite.vti")
+    expected = _reference(pv.MultiBlock([pv.read(path) for path in spec["paths"]]), spec["cast"])
+    _assert_same_image(got, expected, report["casts"]["composite"], "composite")
+    # Both blocks are seen (flat indices 1 and 2); each keeps its own cell ids and arrays.
+    assert set(np.unique(got["CompositeIndex"])) == {-1, 1, 2}
+    ball = got["CompositeIndex"] == 2
+    assert (got["Patch"][~ball] == 0).all() and np.isnan(got["Pressure"][ball]).all()
 
 
 def test_camera_change_recasts_without_rebuilding(pvbatch_run):

@@ -14,10 +14,9 @@ from collections.abc import Iterable
 from typing import NamedTuple
 
 import numpy as np
-from vtkmodules.util.numpy_support import vtk_to_numpy
 
 from . import _core
-from .mesh import PreparedMesh
+from .mesh import PreparedMesh, numeric_arrays
 
 __all__ = [
     "DEFAULT_ARRAYS",
@@ -31,13 +30,23 @@ __all__ = [
 ]
 
 #: Arrays the caster itself produces, in output order.
-GEOMETRY_ARRAYS = ("TriangleId", "CellId", "Barycentric", "Depth", "Position", "Normal", "vtkValidPointMask")
+GEOMETRY_ARRAYS = (
+    "TriangleId",
+    "CellId",
+    "Barycentric",
+    "Depth",
+    "Position",
+    "Normal",
+    "vtkValidPointMask",
+    "CompositeIndex",
+)
 #: What ``arrays=None`` gives (Position and Normal only when asked for).
 DEFAULT_ARRAYS = ("TriangleId", "CellId", "Barycentric", "Depth", "vtkValidPointMask")
 #: The request's attribute each geometry array is written through, and its row shape.
 _GEOMETRY = {
     "TriangleId": ("triangle_id", ()),
     "CellId": ("cell_id", ()),
+    "CompositeIndex": ("composite_index", ()),
     "vtkValidPointMask": ("valid", ()),
     "Depth": ("depth", ()),
     "Barycentric": ("barycentric", (3,)),
@@ -51,30 +60,25 @@ class MeshArrays(NamedTuple):
 
     point: dict[str, np.ndarray]
     cell: dict[str, np.ndarray]
+    composite: bool = False  #: whether the mesh came from a composite dataset (CompositeIndex exists)
 
 
 def mesh_arrays(mesh: PreparedMesh) -> MeshArrays:
     """Numeric point and cell arrays of the mesh (names of geometry arrays excluded): VTK's
     integer and floating types, any number of components."""
-    found: list[dict[str, np.ndarray]] = []
-    for data in (mesh.surface.GetPointData(), mesh.surface.GetCellData()):
-        arrays = {}
-        for k in range(data.GetNumberOfArrays()):
-            array = data.GetArray(k)  # None for string and other non-numeric arrays
-            name = array.GetName() if array is not None else None
-            if name and name not in GEOMETRY_ARRAYS and not array.IsA("vtkBitArray"):
-                values = np.ascontiguousarray(vtk_to_numpy(array))
-                if values.dtype.kind in "iuf":
-                    arrays[name] = values
-        found.append(arrays)
-    return MeshArrays(*found)
+    point, cell = numeric_arrays(mesh.surface)
+    return MeshArrays(
+        *({n: v for n, v in found.items() if n not in GEOMETRY_ARRAYS} for found in (point, cell)),
+        composite=mesh.composite_ids is not None,
+    )
 
 
 def select_arrays(found: MeshArrays, arrays: Iterable[str] | str | None, interpolate: bool) -> list[str]:
     """Names of the output arrays: ``arrays`` checked against what exists, or the defaults
-    (plus the mesh's own arrays when ``interpolate``)."""
+    (plus CompositeIndex for a composite input, and the mesh's own arrays when
+    ``interpolate``)."""
     if arrays is None:
-        names = list(DEFAULT_ARRAYS)
+        names = list(DEFAULT_ARRAYS) + (["CompositeIndex"] if found.composite else [])
         if interpolate:
             names += [n for n in (*found.point, *found.cell) if n not in names]
         return names
@@ -87,6 +91,8 @@ def select_arrays(found: MeshArrays, arrays: Iterable[str] | str | None, interpo
         if name not in GEOMETRY_ARRAYS and name not in found.point and name not in found.cell:
             known = ", ".join([*GEOMETRY_ARRAYS, *found.point, *found.cell])
             raise ValueError(f"unknown array {name!r}; available: {known}")
+        if name == "CompositeIndex" and not found.composite:
+            raise ValueError("CompositeIndex exists for composite inputs (pyvista.MultiBlock, ...) only")
         if name not in names:
             names.append(name)
     return names
@@ -95,7 +101,8 @@ def select_arrays(found: MeshArrays, arrays: Iterable[str] | str | None, interpo
 def _row(found: MeshArrays, name: str, real: type) -> tuple[np.dtype, tuple[int, ...]]:
     """Element type and row shape of output array ``name``."""
     if name in _GEOMETRY:
-        dtype = np.uint8 if name == "vtkValidPointMask" else (np.int64 if name.endswith("Id") else real)
+        ids = name.endswith("Id") or name == "CompositeIndex"
+        dtype = np.uint8 if name == "vtkValidPointMask" else (np.int64 if ids else real)
         return np.dtype(dtype), _GEOMETRY[name][1]
     values = found.point.get(name)
     values = found.cell[name] if values is None else values
@@ -132,5 +139,7 @@ def request_outputs(
         request.mesh_triangles = mesh.triangles
     if "CellId" in buffers:
         request.cell_ids = mesh.cell_ids
+    if "CompositeIndex" in buffers:
+        request.composite_ids = mesh.composite_ids
     if found.cell.keys() & buffers.keys():
         request.surface_cell_ids = mesh.surface_cell_ids

@@ -1,4 +1,5 @@
-"""RayCastFilter: the ray caster as a VTK pipeline algorithm (vtkDataSet -> vtkImageData).
+"""RayCastFilter: the ray caster as a VTK pipeline algorithm (vtkDataSet or composite
+dataset -> vtkImageData).
 
 Imports only vtkmodules, numpy and the native core (never pyvista), so it runs inside other
 VTK distributions too.
@@ -11,10 +12,11 @@ from typing import Any
 
 from vtkmodules.util.vtkAlgorithm import VTKPythonAlgorithmBase
 from vtkmodules.vtkCommonCore import vtkCommand, vtkOutputWindow
-from vtkmodules.vtkCommonDataModel import vtkDataObject, vtkDataSet, vtkImageData
-from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline
+from vtkmodules.vtkCommonDataModel import vtkCompositeDataSet, vtkDataObject, vtkDataSet, vtkImageData
+from vtkmodules.vtkCommonExecutionModel import vtkAlgorithm, vtkStreamingDemandDrivenPipeline
 
 from .camera import Camera, _pixels
+from .composite import leaves
 from .image import image_geometry
 from .scene import Scene, _precision, _strategy, _threads
 
@@ -23,7 +25,8 @@ __all__ = ["RayCastFilter"]
 
 class RayCastFilter(VTKPythonAlgorithmBase):
     """Ray casts its input (any vtkDataSet; polygonal data directly, other datasets by
-    their surface) from a vtkCamera into a geometry buffer image.
+    their surface; or a composite dataset, cast as one scene with ``CompositeIndex``) from
+    a vtkCamera into a geometry buffer image.
 
     The acceleration structure is built once per input: a camera change (the camera's
     own ``ModifiedEvent``, e.g. ``Azimuth(10)``) re-casts without rebuilding; a new input,
@@ -51,7 +54,7 @@ class RayCastFilter(VTKPythonAlgorithmBase):
     """
 
     def __init__(self) -> None:
-        super().__init__(nInputPorts=1, inputType="vtkDataSet", nOutputPorts=1, outputType="vtkImageData")
+        super().__init__(nInputPorts=1, inputType="vtkDataObject", nOutputPorts=1, outputType="vtkImageData")
         self._camera: Any = None
         self._camera_observer: int | None = None
         self._resolution = (640, 480)
@@ -152,7 +155,7 @@ class RayCastFilter(VTKPythonAlgorithmBase):
     def GetWorldSpace(self) -> bool:
         return self._world_space
 
-    def SetInputData(self, data: vtkDataSet) -> None:
+    def SetInputData(self, data: vtkDataObject) -> None:
         """Uses ``data`` as the input, without an upstream algorithm."""
         self.SetInputDataObject(0, data)
 
@@ -166,12 +169,18 @@ class RayCastFilter(VTKPythonAlgorithmBase):
 
     # -- pipeline --------------------------------------------------------------------
 
-    def _view(self, data: vtkDataSet | None) -> Camera:
+    def FillInputPortInformation(self, port: int, info: Any) -> int:
+        # Composite datasets whole (one scene), not block by block as the executive would
+        # loop over them for an algorithm taking vtkDataSet only.
+        info.Set(vtkAlgorithm.INPUT_REQUIRED_DATA_TYPE(), "vtkDataSet")
+        info.Append(vtkAlgorithm.INPUT_REQUIRED_DATA_TYPE(), "vtkCompositeDataSet")
+        return 1
+
+    def _view(self, data: vtkDataObject | None) -> Camera:
         nx, ny = self._resolution
         if self._camera is not None:
             return Camera.from_vtk(self._camera, nx=nx, ny=ny)
-        bounds = data.GetBounds() if data is not None and data.GetNumberOfPoints() else (-1, 1, -1, 1, -1, 1)
-        return Camera.framing(bounds, nx=nx, ny=ny)
+        return Camera.framing(_bounds(data), nx=nx, ny=ny)
 
     def _report(self, error: BaseException) -> int:
         """Keeps ``error`` for Update() to raise and reports it as a VTK error."""
@@ -197,10 +206,10 @@ class RayCastFilter(VTKPythonAlgorithmBase):
 
     def RequestData(self, request: Any, in_info: Any, out_info: Any) -> int:
         self._error = None
-        data = vtkDataSet.GetData(in_info[0])
+        data = vtkDataObject.GetData(in_info[0])
         output = vtkImageData.GetData(out_info)
         try:
-            key = (data.GetAddressAsString("vtkDataSet"), data.GetMTime())
+            key = _data_key(data)
             if self._scene is None or key != self._scene_key:
                 self._scene = Scene(data, threads=self._threads)
                 self._scene_key = key
@@ -245,3 +254,29 @@ class RayCastFilter(VTKPythonAlgorithmBase):
         result = super().update(**kwargs)
         self._raise_pending()
         return result
+
+
+def _datasets(data: vtkDataObject | None) -> list[vtkDataSet]:
+    if isinstance(data, vtkCompositeDataSet):
+        return [leaf for _, leaf in leaves(data)]
+    return [data] if isinstance(data, vtkDataSet) else []
+
+
+def _data_key(data: vtkDataObject) -> tuple:
+    """What identifies the input's state: a composite's own modification time does not
+    follow its blocks', so each block's address and time count."""
+    return (
+        data.GetAddressAsString("vtkDataObject"),
+        data.GetMTime(),
+        tuple((leaf.GetAddressAsString("vtkDataObject"), leaf.GetMTime()) for leaf in _datasets(data)),
+    )
+
+
+def _bounds(data: vtkDataObject | None) -> tuple[float, ...]:
+    """The input's bounds (every block's, for a composite); a unit box when it has no points."""
+    boxes = [leaf.GetBounds() for leaf in _datasets(data) if leaf.GetNumberOfPoints()]
+    if not boxes:
+        return (-1, 1, -1, 1, -1, 1)
+    low = [min(box[k] for box in boxes) for k in (0, 2, 4)]
+    high = [max(box[k] for box in boxes) for k in (1, 3, 5)]
+    return (low[0], high[0], low[1], high[1], low[2], high[2])

@@ -8,11 +8,13 @@ from typing import Any
 
 import numpy as np
 from vtkmodules.util.numpy_support import numpy_to_vtkIdTypeArray, vtk_to_numpy
-from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkDataSet, vtkPolyData
+from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkCompositeDataSet, vtkDataSet, vtkPolyData
 from vtkmodules.vtkFiltersCore import vtkTriangleFilter
 from vtkmodules.vtkFiltersGeometry import vtkDataSetSurfaceFilter
 
-__all__ = ["PreparedMesh", "prepare_mesh"]
+from .composite import merge_leaves
+
+__all__ = ["PreparedMesh", "numeric_arrays", "prepare_mesh"]
 
 
 @dataclass(frozen=True)
@@ -32,7 +34,11 @@ class PreparedMesh:
         (the same array as ``cell_ids`` for polygonal input).
     surface : vtkPolyData
         The polygonal data whose point and cell arrays are interpolated (the input itself
-        for polygonal input; its extracted surface otherwise). Never modified.
+        for polygonal input; its extracted surface otherwise; for a composite input, the
+        leaves' triangles and arrays merged). Never modified.
+    composite_ids : numpy.ndarray or None
+        ``(n_triangles,)`` int64 flat index of the leaf each triangle came from, for a
+        composite input (``cell_ids`` are then local to the leaf); None otherwise.
     """
 
     points: np.ndarray
@@ -40,6 +46,7 @@ class PreparedMesh:
     cell_ids: np.ndarray
     surface_cell_ids: np.ndarray
     surface: vtkPolyData
+    composite_ids: np.ndarray | None = None
 
     @property
     def n_triangles(self) -> int:
@@ -137,7 +144,27 @@ def as_polydata(mesh: Any) -> tuple[vtkPolyData, np.ndarray | None]:
         cell_map = vtk_to_numpy(ids).astype(np.int64) if ids is not None else np.zeros(0, np.int64)
         out.GetCellData().RemoveArray("vtkraycast_source_cell")
         return out, cell_map
-    raise TypeError(f"expected a vtkPolyData, pyvista.PolyData or another vtkDataSet, got {type(mesh).__name__}")
+    raise TypeError(
+        "expected a vtkPolyData, pyvista.PolyData, another vtkDataSet or a composite dataset "
+        f"(vtkMultiBlockDataSet, pyvista.MultiBlock, vtkPartitionedDataSet), got {type(mesh).__name__}"
+    )
+
+
+def numeric_arrays(data: vtkDataSet) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The named numeric point and cell arrays of ``data`` (VTK's integer and floating
+    types, any number of components; bit and string arrays skipped), as numpy views."""
+    found: list[dict[str, np.ndarray]] = []
+    for attributes in (data.GetPointData(), data.GetCellData()):
+        arrays = {}
+        for k in range(attributes.GetNumberOfArrays()):
+            array = attributes.GetArray(k)  # None for string and other non-numeric arrays
+            name = array.GetName() if array is not None else None
+            if name and not array.IsA("vtkBitArray"):
+                values = np.ascontiguousarray(vtk_to_numpy(array))
+                if values.dtype.kind in "iuf":
+                    arrays[name] = values
+        found.append(arrays)
+    return found[0], found[1]
 
 
 def prepare_mesh(mesh: Any) -> PreparedMesh:
@@ -156,6 +183,9 @@ def prepare_mesh(mesh: Any) -> PreparedMesh:
     >>> prepared.n_triangles, prepared.cell_ids.tolist()
     (2, [0, 0])
     """
+    if isinstance(mesh, vtkCompositeDataSet):
+        points, triangles, cell_ids, leaf_ids, surface = merge_leaves(mesh, prepare_mesh, numeric_arrays)
+        return PreparedMesh(points, triangles, cell_ids, np.arange(len(triangles), dtype=np.int64), surface, leaf_ids)
     poly, cell_map = as_polydata(mesh)
     n_points = poly.GetNumberOfPoints()
     if n_points >= 2**32:

@@ -32,6 +32,7 @@ RAY_ARRAYS = {
     "barycentric": "Barycentric",
     "position": "Position",
     "normal": "Normal",
+    "composite_index": "CompositeIndex",
 }
 DEFAULT_RAY_ARRAYS = ("triangle_id", "cell_id", "t", "barycentric")
 #: Refuse images whose output arrays alone would exceed this many bytes.
@@ -325,7 +326,9 @@ class Scene:
         ``arrays`` picks among ``triangle_id`` and ``cell_id`` (int64, -1 on a miss), ``t`` (in
         units of the direction's length), ``barycentric`` (weights of the triangle's points),
         ``position`` (the hit point) and ``normal`` (the triangle's unit normal, right-hand
-        rule), NaN on a miss; by default the first four. Work for the others is skipped.
+        rule), NaN on a miss; by default the first four. For a composite input,
+        ``composite_index`` (the hit leaf's flat index, -1 on a miss; ``cell_id`` is then
+        local to the leaf) joins the defaults. Work for arrays not asked for is skipped.
 
         ``tmin`` must be >= 0 (hits behind an origin are not cast). Rays far beyond what the
         precision's arithmetic holds, or hits whose ``t`` leaves the output type's range,
@@ -340,7 +343,7 @@ class Scene:
         >>> hits["t"].tolist(), hits["position"][1].tolist()
         ([1.0, 1.0], [0.5, 0.0, 0.0])
         """
-        names = _ray_arrays(arrays)
+        names = _ray_arrays(arrays, self._mesh.composite_ids is not None)
         real = _precision(precision)
         request, shape, (k, j) = self._ray_request(
             origins, directions, tmin, tmax, strategy, precision, accel, threads, backface_culling
@@ -428,13 +431,15 @@ class Scene:
         return request, shape, (k, j)
 
 
-def _ray_arrays(arrays: Iterable[str] | str | None) -> list[str]:
+def _ray_arrays(arrays: Iterable[str] | str | None, composite: bool) -> list[str]:
     if arrays is None:
-        return list(DEFAULT_RAY_ARRAYS)
+        return list(DEFAULT_RAY_ARRAYS) + (["composite_index"] if composite else [])
     names = [arrays] if isinstance(arrays, str) else list(arrays)
     for name in names:
         if name not in RAY_ARRAYS:
             raise ValueError(f"unknown ray array {name!r}; available: {', '.join(RAY_ARRAYS)}")
+        if name == "composite_index" and not composite:
+            raise ValueError("composite_index exists for scenes of composite inputs (pyvista.MultiBlock, ...) only")
     return list(dict.fromkeys(names))
 
 

@@ -116,7 +116,8 @@ def reference_arrays(mesh, names: list[str], triangle_id: np.ndarray, barycentri
     excepted, which come from the ray-triangle test itself)."""
     from .fields import mesh_arrays
 
-    point_arrays, cell_arrays = mesh_arrays(mesh)
+    found = mesh_arrays(mesh)
+    point_arrays, cell_arrays = found.point, found.cell
     real = barycentric.dtype
     hit = triangle_id >= 0
     hit_ids = triangle_id[hit]
@@ -142,6 +143,8 @@ def reference_arrays(mesh, names: list[str], triangle_id: np.ndarray, barycentri
             out[name] = triangle_id
         elif name == "CellId":
             out[name] = np.where(hit, mesh.cell_ids[np.maximum(triangle_id, 0)] if mesh.n_triangles else -1, -1)
+        elif name == "CompositeIndex":
+            out[name] = np.where(hit, mesh.composite_ids[np.maximum(triangle_id, 0)] if mesh.n_triangles else -1, -1)
         elif name == "vtkValidPointMask":
             out[name] = hit.astype(np.uint8)
         elif name == "Position":

@@ -17,6 +17,7 @@ plan = json.load(open(sys.argv[1]))
 
 from paraview.simple import (  # noqa: E402
     GetParaViewSourceVersion,
+    GroupDatasets,
     LoadPlugin,
     OpenDataFile,
     Sphere,
@@ -94,6 +95,11 @@ report["builds_after_mesh_change"] = builds(ray_cast)
 for case, spec in plan["files"].items():
     reader = OpenDataFile(spec["path"])
     cast(case, RayCast(Input=reader, **spec["cast"]))  # noqa: F821
+
+# -- a composite input: files grouped into a multiblock dataset, cast as one scene ------
+spec = plan["composite"]
+group = GroupDatasets(Input=[OpenDataFile(path) for path in spec["paths"]])
+cast("composite", RayCast(Input=group, **spec["cast"]))  # noqa: F821
 
 # -- bad property values: an error message and an empty output, never a crash ---------
 spec = plan["errors"]
