@@ -26,6 +26,7 @@ __all__ = [
     "mesh_arrays",
     "output_bytes",
     "request_outputs",
+    "row_layout",
     "select_arrays",
 ]
 
@@ -64,11 +65,12 @@ class MeshArrays(NamedTuple):
 
 
 def mesh_arrays(mesh: PreparedMesh) -> MeshArrays:
-    """Numeric point and cell arrays of the mesh (names of geometry arrays excluded): VTK's
-    integer and floating types, any number of components."""
+    """Numeric point and cell arrays of the mesh (names of geometry arrays and VTK's ghost
+    flags excluded): VTK's integer and floating types, any number of components."""
     point, cell = numeric_arrays(mesh.surface)
+    excluded = (*GEOMETRY_ARRAYS, "vtkGhostType")
     return MeshArrays(
-        *({n: v for n, v in found.items() if n not in GEOMETRY_ARRAYS} for found in (point, cell)),
+        *({n: v for n, v in found.items() if n not in excluded} for found in (point, cell)),
         composite=mesh.composite_ids is not None,
     )
 
@@ -98,7 +100,7 @@ def select_arrays(found: MeshArrays, arrays: Iterable[str] | str | None, interpo
     return names
 
 
-def _row(found: MeshArrays, name: str, real: type) -> tuple[np.dtype, tuple[int, ...]]:
+def row_layout(found: MeshArrays, name: str, real: type) -> tuple[np.dtype, tuple[int, ...]]:
     """Element type and row shape of output array ``name``."""
     if name in _GEOMETRY:
         ids = name.endswith("Id") or name == "CompositeIndex"
@@ -111,13 +113,13 @@ def _row(found: MeshArrays, name: str, real: type) -> tuple[np.dtype, tuple[int,
 
 def output_bytes(found: MeshArrays, names: list[str], real: type) -> int:
     """Bytes per ray of the output arrays ``names``."""
-    return sum(dtype.itemsize * math.prod(shape) for dtype, shape in (_row(found, name, real) for name in names))
+    return sum(dtype.itemsize * math.prod(shape) for dtype, shape in (row_layout(found, name, real) for name in names))
 
 
 def allocate(found: MeshArrays, names: list[str], n: int, real: type) -> dict[str, np.ndarray]:
     """Uninitialised output arrays for ``n`` rays, in the order of ``names`` (the core
     writes every element)."""
-    rows = {name: _row(found, name, real) for name in names}
+    rows = {name: row_layout(found, name, real) for name in names}
     return {name: np.empty((n, *shape), dtype) for name, (dtype, shape) in rows.items()}
 
 

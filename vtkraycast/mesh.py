@@ -16,6 +16,9 @@ from .composite import merge_leaves
 
 __all__ = ["PreparedMesh", "numeric_arrays", "prepare_mesh"]
 
+#: vtkDataSetAttributes' DUPLICATECELL | HIDDENCELL.
+_SKIPPED_GHOSTS = 1 | 32
+
 
 @dataclass(frozen=True)
 class PreparedMesh:
@@ -39,6 +42,9 @@ class PreparedMesh:
     composite_ids : numpy.ndarray or None
         ``(n_triangles,)`` int64 flat index of the leaf each triangle came from, for a
         composite input (``cell_ids`` are then local to the leaf); None otherwise.
+    global_cell_ids : numpy.ndarray or None
+        The input's global cell ids (``GetCellData().GetGlobalIds()``), indexed by input
+        cell id, when it has them: what orders triangles across MPI ranks.
     """
 
     points: np.ndarray
@@ -47,6 +53,7 @@ class PreparedMesh:
     surface_cell_ids: np.ndarray
     surface: vtkPolyData
     composite_ids: np.ndarray | None = None
+    global_cell_ids: np.ndarray | None = None
 
     @property
     def n_triangles(self) -> int:
@@ -212,4 +219,21 @@ def prepare_mesh(mesh: Any) -> PreparedMesh:
         raise ValueError(f"the mesh has non-finite point coordinates (point {bad}: {points[bad].tolist()})")
     ids = ids.astype(np.int64)
     input_ids = ids if cell_map is None else cell_map[ids]
-    return PreparedMesh(points, np.ascontiguousarray(tris, dtype=np.uint32), input_ids, ids, poly)
+    cell_data = mesh.GetCellData()
+    ghosts = cell_data.GetArray("vtkGhostType")
+    for name, array in (("vtkGhostType", ghosts), ("global cell ids", cell_data.GetGlobalIds())):
+        if array is not None and array.GetNumberOfTuples() != mesh.GetNumberOfCells():
+            raise ValueError(
+                f"the mesh's {name} array has {array.GetNumberOfTuples()} values for {mesh.GetNumberOfCells()} cells"
+            )
+    if ghosts is not None and len(input_ids):
+        # Cells another piece owns (duplicate) or that are not to be shown (hidden), as
+        # VTK's renderers skip them.
+        flags = vtk_to_numpy(ghosts)[input_ids].astype(np.int64)
+        keep = (flags & _SKIPPED_GHOSTS) == 0
+        tris, ids, input_ids = tris[keep], ids[keep], input_ids[keep]
+    global_ids = cell_data.GetGlobalIds()
+    global_ids = vtk_to_numpy(global_ids).astype(np.int64) if global_ids is not None else None
+    return PreparedMesh(
+        points, np.ascontiguousarray(tris, dtype=np.uint32), input_ids, ids, poly, global_cell_ids=global_ids
+    )

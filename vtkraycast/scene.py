@@ -13,10 +13,11 @@ from vtkmodules.vtkCommonDataModel import vtkImageData
 
 from . import _core
 from .camera import Camera
-from .fields import allocate, mesh_arrays, output_bytes, request_outputs, select_arrays
+from .fields import GEOMETRY_ARRAYS, allocate, mesh_arrays, output_bytes, request_outputs, row_layout, select_arrays
 from .image import fill_image
 from .magnitudes import direction_shifts, scene_scale, shift_lengths
 from .mesh import prepare_mesh
+from .parallel import NO_HIT, communicator, composite, default_threads, triangle_keys
 
 __all__ = ["PRECISIONS", "STRATEGIES", "Scene"]
 
@@ -109,10 +110,12 @@ class Scene:
 
     Parameters
     ----------
-    mesh : pyvista.PolyData or vtkDataSet
+    mesh : pyvista.PolyData, vtkDataSet or composite dataset
         Polygons and strips are triangulated (each triangle remembers its input cell);
-        vertex and line cells are ignored; other datasets contribute their surface. The
-        mesh is copied: later changes to it do not affect the scene.
+        vertex and line cells are ignored; other datasets contribute their surface; the
+        leaves of a composite dataset (pyvista.MultiBlock, vtkMultiBlockDataSet,
+        vtkPartitionedDataSet) make one scene. The mesh is copied: later changes to it do
+        not affect the scene.
     threads : int, optional
         Threads for the build; all cores by default.
     bvh : bool, default: True
@@ -120,6 +123,12 @@ class Scene:
         none: a camera cast then bins the triangles to the image's tiles instead, which is
         cheaper for a single cast (what :func:`cast` does); :meth:`intersect` then needs
         ``accel="none"``.
+    comm : mpi4py communicator or vtkMultiProcessController, optional
+        ``mesh`` is this rank's piece of a mesh distributed over the ranks of ``comm``:
+        every :meth:`cast` is then collective and gives the image of the whole mesh, equal
+        to the serial one when the pieces carry global cell ids (ties between ranks go to
+        the lowest). Cells flagged duplicate or hidden in ``vtkGhostType`` are skipped (in
+        serial casts too). Threads default to the node's cores divided by its ranks.
 
     Examples
     --------
@@ -133,9 +142,13 @@ class Scene:
     1.5
     """
 
-    def __init__(self, mesh: Any, *, threads: int | None = None, bvh: bool = True) -> None:
+    def __init__(self, mesh: Any, *, threads: int | None = None, bvh: bool = True, comm: Any = None) -> None:
         if not isinstance(bvh, (bool, np.bool_)):
             raise TypeError(f"bvh must be True or False, got {bvh!r}")
+        self._comm = None if comm is None else communicator(comm)
+        if comm is not None and threads is None:
+            threads = default_threads(comm)
+        self._threads = threads
         self._mesh = prepare_mesh(mesh)
         points, triangles = self._mesh.points, self._mesh.triangles
         self._core = _core.Scene(points, triangles, _threads(threads), bool(bvh))
@@ -179,8 +192,12 @@ class Scene:
             raise TypeError("buffers() places no image: world_space is an option of cast()")
         return self._cast_into(None, camera, **options)
 
-    def cast(self, camera: Camera | Any, **options: Any) -> Any:
+    def cast(self, camera: Camera | Any, *, root: int | None = 0, **options: Any) -> Any:
         """Casts one ray per pixel of ``camera`` and returns the geometry buffer.
+
+        For a scene built with ``comm`` (MPI) the cast is collective: every rank casts its
+        piece, and ``root`` receives the image of the whole mesh (every rank when None;
+        the others get None).
 
         Parameters
         ----------
@@ -226,8 +243,46 @@ class Scene:
         """
         import pyvista as pv
 
+        if self._comm is not None:
+            return self._cast_parallel(camera, root=root, **options)
         image = pv.ImageData()
         self._cast_into(image, camera, **options)
+        return image
+
+    def _cast_parallel(self, camera: Camera | Any, *, root: int | None, **options: Any) -> Any:
+        """The collective cast of a scene built with ``comm`` (see :meth:`cast`)."""
+        import pyvista as pv
+
+        comm = self._comm
+        if root is not None and not 0 <= root < comm.size:
+            raise ValueError(f"root must be a rank (0 to {comm.size - 1}) or None, got {root}")
+        camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
+        found = mesh_arrays(self._mesh)
+        names = select_arrays(found, options.pop("arrays", None), options.pop("interpolate", True))
+        real = _precision(options.get("precision", "float64"))
+        layout = {name: row_layout(found, name, real) for name in names if name in found.point or name in found.cell}
+        # Every rank's names and array layouts, merged in rank order: a rank may lack a
+        # mesh array (an empty piece has none) and still take part.
+        merged: dict[str, tuple] = {}
+        for rank_names, rank_layout in comm.gather_object((names, layout)):
+            for name in rank_names:
+                merged.setdefault(name, rank_layout.get(name) or row_layout(found, name, real))
+        local = [name for name in merged if name in GEOMETRY_ARRAYS or name in found.point or name in found.cell]
+        needed = list(dict.fromkeys([*local, "Depth", "TriangleId"]))
+        options.setdefault("threads", self._threads)
+        _, buffers = self._cast_into(None, camera, arrays=needed, **options)
+        triangle = buffers["TriangleId"]
+        keys = triangle_keys(self._mesh.cell_ids, self._mesh.global_cell_ids, comm.rank)
+        hit_keys = np.where(triangle >= 0, keys[np.maximum(triangle, 0)] if len(keys) else NO_HIT, NO_HIT)
+        if self._mesh.global_cell_ids is not None and "CellId" in buffers:
+            cells = buffers["CellId"]
+            cells[cells >= 0] = self._mesh.global_cell_ids[cells[cells >= 0]]
+        tie = 32 * float(np.finfo(real).eps)
+        arrays = composite(comm, buffers, hit_keys, dict(merged), root, tie)
+        if arrays is None:
+            return None
+        image = pv.ImageData()
+        fill_image(image, camera, arrays, world_space=options.get("world_space", False))
         return image
 
     def _cast_into(
@@ -470,8 +525,12 @@ def progress_reporter(
         bar.update(100 - bar.n)
 
 
-def cast(mesh: Any, camera: Camera | Any, **options: Any) -> Any:
+def cast(mesh: Any, camera: Camera | Any, *, comm: Any = None, root: int | None = 0, **options: Any) -> Any:
     """Casts ``mesh`` from ``camera`` once: ``Scene(mesh).cast(camera, ...)``.
+
+    Under MPI, ``mesh`` is this rank's piece and ``comm`` an mpi4py communicator: the call
+    is collective and ``root`` receives the image of the whole mesh (every rank when None,
+    the others get None); see :class:`Scene`.
 
     Keyword options are those of :meth:`Scene.cast`. No BVH is built (``Scene(mesh,
     bvh=False)``): the triangles are binned to the image's tiles, all one cast needs. Build
@@ -490,11 +549,12 @@ def cast(mesh: Any, camera: Camera | Any, **options: Any) -> Any:
     True
     """
     camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
-    return one_shot_scene(mesh, camera, threads=options.get("threads")).cast(camera, **options)
+    scene = one_shot_scene(mesh, camera, threads=options.get("threads"), comm=comm)
+    return scene.cast(camera, root=root, **options)
 
 
-def one_shot_scene(mesh: Any, camera: Camera, *, threads: int | None = None) -> Scene:
+def one_shot_scene(mesh: Any, camera: Camera, *, threads: int | None = None, comm: Any = None) -> Scene:
     """The scene one cast from ``camera`` needs: without a BVH (its triangles are binned to
     the image's tiles) unless the image is wider or higher than binning allows
     (``_core.max_binned_pixels``)."""
-    return Scene(mesh, threads=threads, bvh=max(camera.nx, camera.ny) > _core.max_binned_pixels)
+    return Scene(mesh, threads=threads, bvh=max(camera.nx, camera.ny) > _core.max_binned_pixels, comm=comm)

@@ -1,0 +1,38 @@
+"""Run under MPI by tests/test_mpi.py: ``mpiexec -n N python cast_pieces.py OUT.npz``.
+
+Every rank builds the same test mesh (a torus with point and cell arrays, and the input's
+cell order as global cell ids), keeps its own piece of the cells (rank 0 none when asked:
+a rank without triangles), casts it with ``vrc.cast(piece, camera, comm=...)`` and the
+image reaches rank 0 (``root=0``) or every rank (``root=None``); rank 0 writes the arrays.
+"""
+
+import sys
+
+import numpy as np
+from mpi4py import MPI
+
+import vtkraycast as vrc
+
+sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parent.parent))
+from test_mpi import CAMERA, pieces, torus
+
+comm = MPI.COMM_WORLD
+out, mode = sys.argv[1], sys.argv[2]
+mesh = torus()
+piece = pieces(mesh, comm.size, empty_first=mode == "empty_first")[comm.rank]
+before = piece.copy(deep=True)
+image = vrc.cast(piece, CAMERA, comm=comm, root=0)
+everywhere = vrc.Scene(piece, comm=comm).cast(CAMERA, root=None, arrays=["Depth", "CellId"])
+assert piece == before  # the input is never modified
+assert (image is not None) == (comm.rank == 0) and everywhere is not None
+gathered = comm.gather(everywhere["Depth"], root=0)
+if comm.rank == 0:
+    for depth in gathered:  # every rank received the same image
+        np.testing.assert_array_equal(depth, gathered[0])
+    np.savez(
+        out,
+        names=np.array(image.array_names),
+        **{name: image[name] for name in image.array_names},
+        everywhere_depth=everywhere["Depth"],
+        everywhere_cell=everywhere["CellId"],
+    )
