@@ -279,6 +279,10 @@ bool cast(const vrc::Scene& scene, const Request& q) {
 }  // namespace
 
 NB_MODULE(_core, m) {
+    // pvbatch under MPI ends its interpreter without releasing every Python object that
+    // holds a core function (VTK's observers, ParaView's proxies), and nanobind then reports
+    // them as leaks at exit: nothing a user can act on, the process is ending.
+    nb::set_leak_warnings(false);
     m.doc() = "Native core of vtkraycast: BVH build, traversal and intersection kernels.";
     nb::class_<vrc::Scene>(m, "Scene")
         .def(

@@ -17,7 +17,7 @@ from vtkmodules.vtkCommonExecutionModel import vtkAlgorithm, vtkStreamingDemandD
 
 from .camera import Camera, _pixels
 from .composite import leaves
-from .image import image_geometry
+from .image import fill_image, image_geometry, set_arrays
 from .scene import Scene, _precision, _strategy, _threads
 
 __all__ = ["RayCastFilter"]
@@ -194,6 +194,10 @@ class RayCastFilter(VTKPythonAlgorithmBase):
             nx, ny = self._resolution
             info = out_info.GetInformationObject(0)
             info.Set(vtkStreamingDemandDrivenPipeline.WHOLE_EXTENT(), 0, nx - 1, 0, ny - 1, 0, 0)
+            # Under MPI each rank produces the block of the image the pipeline asks of it
+            # (its piece of the extent), so ParaView assembles one image, as
+            # vtkPResampleToImage does.
+            info.Set(vtkAlgorithm.CAN_PRODUCE_SUB_EXTENT(), 1)
             # Where the image lies is known before the data only for an explicit camera.
             world = self._world_space and self._camera is not None
             origin, spacing, direction = image_geometry(self._view(None) if world else None, world)
@@ -210,10 +214,14 @@ class RayCastFilter(VTKPythonAlgorithmBase):
         output = vtkImageData.GetData(out_info)
         try:
             key = _data_key(data)
+            controller = _parallel_controller()
             if self._scene is None or key != self._scene_key:
-                self._scene = Scene(data, threads=self._threads)
+                self._scene = Scene(data, threads=self._threads, comm=controller)
                 self._scene_key = key
                 self._builds += 1
+            if controller is not None:
+                self._cast_block(output, out_info.GetInformationObject(0), data)
+                return 1
             self._scene._cast_into(
                 output,
                 self._view(data),
@@ -233,6 +241,30 @@ class RayCastFilter(VTKPythonAlgorithmBase):
             output.Initialize()
             return self._report(error)
         return 1
+
+    def _cast_block(self, output: vtkImageData, info: Any, data: vtkDataObject) -> None:
+        """The collective cast under MPI; this rank's output is the block of rows and
+        columns the pipeline asks of it (its update extent)."""
+        camera, arrays = self._scene._cast_parallel(
+            self._view(data),
+            root=None,
+            arrays=self._arrays,
+            strategy=self._strategy,
+            precision=self._precision,
+            threads=self._threads,
+            backface_culling=self._backface_culling,
+            interpolate=self._interpolate,
+        )
+        x0, x1, y0, y1 = info.Get(vtkStreamingDemandDrivenPipeline.UPDATE_EXTENT())[:4]
+        fill_image(output, camera, {}, world_space=self._world_space)
+        output.SetExtent(x0, x1, y0, y1, 0, 0)
+        block = {
+            name: values.reshape(camera.ny, camera.nx, -1)[y0 : y1 + 1, x0 : x1 + 1].reshape(
+                (y1 - y0 + 1) * (x1 - x0 + 1), *values.shape[1:]
+            )
+            for name, values in arrays.items()
+        }
+        set_arrays(output, block)
 
     def _progress(self, done: int, total: int) -> bool:
         self.UpdateProgress(done / total)
@@ -280,3 +312,14 @@ def _bounds(data: vtkDataObject | None) -> tuple[float, ...]:
     low = [min(box[k] for box in boxes) for k in (0, 2, 4)]
     high = [max(box[k] for box in boxes) for k in (1, 3, 5)]
     return (low[0], high[0], low[1], high[1], low[2], high[2])
+
+
+def _parallel_controller() -> Any:
+    """VTK's global controller when the pipeline runs on several MPI ranks (ParaView's
+    pvbatch and pvserver under mpirun), else None."""
+    try:
+        from vtkmodules.vtkParallelCore import vtkMultiProcessController
+    except ImportError:
+        return None
+    controller = vtkMultiProcessController.GetGlobalController()
+    return controller if controller is not None and controller.GetNumberOfProcesses() > 1 else None

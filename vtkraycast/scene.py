@@ -244,15 +244,18 @@ class Scene:
         import pyvista as pv
 
         if self._comm is not None:
-            return self._cast_parallel(camera, root=root, **options)
+            world_space = options.get("world_space", False)
+            camera, arrays = self._cast_parallel(camera, root=root, **options)
+            return None if arrays is None else fill_image(pv.ImageData(), camera, arrays, world_space=world_space)
         image = pv.ImageData()
         self._cast_into(image, camera, **options)
         return image
 
-    def _cast_parallel(self, camera: Camera | Any, *, root: int | None, **options: Any) -> Any:
-        """The collective cast of a scene built with ``comm`` (see :meth:`cast`)."""
-        import pyvista as pv
-
+    def _cast_parallel(
+        self, camera: Camera | Any, *, root: int | None, **options: Any
+    ) -> tuple[Camera, dict[str, np.ndarray] | None]:
+        """The collective cast of a scene built with ``comm`` (see :meth:`cast`): the camera
+        and the image's arrays (None on ranks other than ``root``)."""
         comm = self._comm
         if root is not None and not 0 <= root < comm.size:
             raise ValueError(f"root must be a rank (0 to {comm.size - 1}) or None, got {root}")
@@ -270,6 +273,7 @@ class Scene:
         local = [name for name in merged if name in GEOMETRY_ARRAYS or name in found.point or name in found.cell]
         needed = list(dict.fromkeys([*local, "Depth", "TriangleId"]))
         options.setdefault("threads", self._threads)
+        options.pop("world_space", None)
         _, buffers = self._cast_into(None, camera, arrays=needed, **options)
         triangle = buffers["TriangleId"]
         keys = triangle_keys(self._mesh.cell_ids, self._mesh.global_cell_ids, comm.rank)
@@ -278,12 +282,7 @@ class Scene:
             cells = buffers["CellId"]
             cells[cells >= 0] = self._mesh.global_cell_ids[cells[cells >= 0]]
         tie = 32 * float(np.finfo(real).eps)
-        arrays = composite(comm, buffers, hit_keys, dict(merged), root, tie)
-        if arrays is None:
-            return None
-        image = pv.ImageData()
-        fill_image(image, camera, arrays, world_space=options.get("world_space", False))
-        return image
+        return camera, composite(comm, buffers, hit_keys, dict(merged), root, tie)
 
     def _cast_into(
         self,
