@@ -1,0 +1,85 @@
+#!/usr/bin/env python
+"""Casting under MPI: what compositing costs beside the cast, measured on local ranks.
+
+    mpiexec -n 2 python benchmarks/mpi.py [--pixels 1024] [--repeats 7]
+
+The frog contour is split among the ranks by cell order (global cell ids attached); each
+rank casts its piece at full resolution with the default arrays, then the nearest hit per
+pixel is composited to rank 0 (vtkraycast/parallel.py). Prints, on rank 0, the median of
+each phase over the repeats (barriers between phases) and the compositing time per pixel.
+On this machine (2 cores) the ranks share the cores, so the cast itself does not scale.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyvista as pv
+from mpi4py import MPI
+
+import vtkraycast as vrc
+from vtkraycast.parallel import communicator, composite
+
+sys.path.insert(0, str(Path(__file__).parent))
+import scenes
+
+GEOMETRY = ["TriangleId", "CellId", "Barycentric", "Depth", "vtkValidPointMask"]
+
+
+def piece_of(mesh: pv.PolyData, rank: int, size: int) -> pv.PolyData:
+    faces = mesh.faces.reshape(-1, 4)
+    cells = np.array_split(np.arange(mesh.n_cells), size)[rank]
+    piece = pv.PolyData(mesh.points, faces=faces[cells].ravel())
+    piece.cell_data["GlobalIds"] = cells.astype(np.int64)
+    piece.GetCellData().SetGlobalIds(piece.GetCellData().GetArray("GlobalIds"))
+    return piece
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pixels", type=int, default=1024)
+    parser.add_argument("--repeats", type=int, default=7)
+    args = parser.parse_args()
+    comm = MPI.COMM_WORLD
+    mesh = scenes.frog()
+    camera = scenes.view(mesh, "framed", args.pixels)
+    scene = vrc.Scene(piece_of(mesh, comm.rank, comm.size), comm=comm)
+    adapter = communicator(comm)
+    casts, composites, totals = [], [], []
+    for _ in range(args.repeats):
+        comm.Barrier()
+        start = time.perf_counter()
+        _, buffers = scene._cast_into(None, camera, arrays=GEOMETRY, threads=scene._threads)
+        comm.Barrier()
+        middle = time.perf_counter()
+        keys = np.where(buffers["TriangleId"] >= 0, buffers["TriangleId"], np.iinfo(np.int64).max)
+        layout = {name: (values.dtype, values.shape[1:]) for name, values in buffers.items()}
+        composite(adapter, buffers, keys, layout, 0, 1e-14)
+        comm.Barrier()
+        end = time.perf_counter()
+        start_full = time.perf_counter()
+        scene.cast(camera)
+        comm.Barrier()
+        totals.append(time.perf_counter() - start_full)
+        casts.append(middle - start)
+        composites.append(end - middle)
+    if comm.rank == 0:
+        cast, comp, total = (float(np.median(x)) for x in (casts, composites, totals))
+        pixels = args.pixels**2
+        print(
+            f"{comm.size} ranks, frog contour framed, {args.pixels}x{args.pixels}, default geometry arrays, "
+            f"{scene._threads} threads per rank, median of {args.repeats}:"
+        )
+        print(
+            f"  local cast {1e3 * cast:.1f} ms, compositing {1e3 * comp:.1f} ms "
+            f"({1e9 * comp / pixels:.1f} ns per pixel, {comp / cast:.0%} of the cast); "
+            f"Scene.cast end to end {1e3 * total:.1f} ms"
+        )
+
+
+if __name__ == "__main__":
+    main()
