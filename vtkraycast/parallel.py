@@ -46,32 +46,68 @@ class VtkController:
     def size(self) -> int:
         return self._controller.GetNumberOfProcesses()
 
-    def reduce(self, values: np.ndarray, op: str, root: int | None) -> np.ndarray | None:
+    def allreduce(self, values: np.ndarray, op: str) -> np.ndarray:
+        from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+
+        send = numpy_to_vtk(np.ascontiguousarray(values.reshape(len(values), -1)), deep=True)
+        receive = send.NewInstance()
+        self._controller.AllReduce(send, receive, self._ops[op])
+        return vtk_to_numpy(receive).reshape(values.shape).astype(values.dtype, copy=False)
+
+    def gather_object(self, value: Any, root: int | None = None) -> list[Any] | None:
+        """Every rank's ``value``, in rank order, on ``root`` (every rank when None)."""
+        from vtkmodules.vtkCommonCore import vtkSignedCharArray
+
+        if root is None:
+            return [self._broadcast_object(value if r == self.rank else None, r) for r in range(self.size)]
+        if self.rank != root:
+            self._controller.Send(_pickled(value), root, _TAG)
+            return None
+        values = []
+        for r in range(self.size):
+            if r == root:
+                values.append(value)
+                continue
+            message = vtkSignedCharArray()
+            self._controller.Receive(message, r, _TAG)
+            values.append(_unpickled(message))
+        return values
+
+    def _broadcast_object(self, value: Any, root: int) -> Any:
+        from vtkmodules.vtkCommonCore import vtkSignedCharArray
+
+        message = _pickled(value) if self.rank == root else vtkSignedCharArray()
+        self._controller.Broadcast(message, root)
+        return value if self.rank == root else _unpickled(message)
+
+    def broadcast(self, values: np.ndarray, root: int) -> np.ndarray:
         from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
 
         flat = np.ascontiguousarray(values.reshape(len(values), -1))
-        send = numpy_to_vtk(flat, deep=True, array_type=None)
-        receive = send.NewInstance()
-        if root is None:
-            self._controller.AllReduce(send, receive, self._ops[op])
-        else:
-            self._controller.Reduce(send, receive, self._ops[op], root)
-            if self.rank != root:
-                return None
-        return vtk_to_numpy(receive).reshape(values.shape).astype(values.dtype, copy=False)
+        message = numpy_to_vtk(flat, deep=True)
+        if self.rank != root:
+            message = message.NewInstance()
+        self._controller.Broadcast(message, root)
+        return vtk_to_numpy(message).reshape(values.shape).astype(values.dtype, copy=False)
 
-    def gather_object(self, value: Any) -> list[Any]:
-        """Every rank's ``value`` (small: names, dtypes), in rank order, on every rank."""
-        import pickle
 
-        data = np.frombuffer(pickle.dumps(value), np.int8)
-        sizes = self.reduce(np.eye(self.size, dtype=np.int64)[self.rank] * len(data), "sum", None)
-        buffer = np.zeros(int(sizes.sum()), np.int8)
-        start = int(sizes[: self.rank].sum())
-        buffer[start : start + len(data)] = data
-        total = self.reduce(buffer, "sum", None)
-        bounds = np.concatenate(([0], np.cumsum(sizes)))
-        return [pickle.loads(total[bounds[r] : bounds[r + 1]].tobytes()) for r in range(self.size)]
+_TAG = 827  # (message tag of the winners' arrays, on VTK's controller)
+
+
+def _pickled(value: Any) -> Any:
+    import pickle
+
+    from vtkmodules.util.numpy_support import numpy_to_vtk
+
+    return numpy_to_vtk(np.frombuffer(pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL), np.int8), deep=True)
+
+
+def _unpickled(message: Any) -> Any:
+    import pickle
+
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    return pickle.loads(vtk_to_numpy(message).tobytes())
 
 
 class Mpi4pyComm:
@@ -90,19 +126,18 @@ class Mpi4pyComm:
     def size(self) -> int:
         return self._comm.Get_size()
 
-    def reduce(self, values: np.ndarray, op: str, root: int | None) -> np.ndarray | None:
-        mpi_op = {"min": self._mpi.MIN, "sum": self._mpi.SUM}[op]
-        send = np.ascontiguousarray(values)
-        if root is None:
-            out = np.empty_like(send)
-            self._comm.Allreduce(send, out, op=mpi_op)
-            return out
-        out = np.empty_like(send) if self.rank == root else None
-        self._comm.Reduce(send, out, op=mpi_op, root=root)
+    def allreduce(self, values: np.ndarray, op: str) -> np.ndarray:
+        out = np.empty_like(values)
+        self._comm.Allreduce(np.ascontiguousarray(values), out, op={"min": self._mpi.MIN, "sum": self._mpi.SUM}[op])
         return out
 
-    def gather_object(self, value: Any) -> list[Any]:
-        return self._comm.allgather(value)
+    def gather_object(self, value: Any, root: int | None = None) -> list[Any] | None:
+        return self._comm.allgather(value) if root is None else self._comm.gather(value, root=root)
+
+    def broadcast(self, values: np.ndarray, root: int) -> np.ndarray:
+        values = np.ascontiguousarray(values)
+        self._comm.Bcast(values, root=root)
+        return values
 
 
 def communicator(comm: Any) -> VtkController | Mpi4pyComm:
@@ -141,6 +176,12 @@ def triangle_keys(cell_ids: np.ndarray, global_ids: np.ndarray | None, rank: int
     return global_ids[cell_ids].astype(np.int64) * _PER_CELL + within
 
 
+def _missing(name: str, dtype: np.dtype) -> float | int:
+    if name in ("TriangleId", "CellId", "CompositeIndex"):
+        return -1
+    return np.nan if dtype.kind == "f" else 0
+
+
 def composite(
     comm: VtkController | Mpi4pyComm,
     buffers: dict[str, np.ndarray],
@@ -152,24 +193,38 @@ def composite(
     """The image of every rank's hits: ``buffers`` (this rank's arrays, Depth among them;
     an array a rank lacks counts as missing there), ``hit_keys`` (this rank's key of each
     pixel's hit, NO_HIT on a miss), ``layout`` (dtype and row shape of every array, agreed
-    by all ranks). Returns the arrays on ``root`` (every rank when None), None elsewhere."""
-    depth = np.where(hit_keys != NO_HIT, buffers["Depth"].astype(np.float64), np.inf)
-    nearest = comm.reduce(depth, "min", None)
-    candidate = (hit_keys != NO_HIT) & (depth <= nearest + tie * np.abs(nearest))
-    winner = comm.reduce(np.where(candidate, hit_keys, NO_HIT), "min", None)
-    mine = candidate & (hit_keys == winner)
-    hit = winner != NO_HIT
-    out = {}
-    for name, (dtype, row) in layout.items():
-        contribution = np.zeros((len(hit_keys), *row), dtype)
-        if name in buffers:
-            contribution[mine] = buffers[name][mine]
-        total = comm.reduce(contribution, "sum", root)
-        if total is None:
-            continue
-        if name in ("TriangleId", "CellId", "CompositeIndex"):
-            total[~hit] = -1
-        elif dtype.kind == "f":
-            total[~hit] = np.nan
-        out[name] = total
-    return out if (root is None or comm.rank == root) else None
+    by all ranks). Returns the arrays on ``root`` (every rank when None), None elsewhere.
+
+    Two reductions over the frame pick each pixel's winner (the least depth, then the
+    lowest key within the tie tolerance); then only the winners' values travel, each rank
+    sending its own to the root."""
+    target = 0 if root is None else root
+    hit = hit_keys != NO_HIT
+    depth = np.where(hit, buffers["Depth"], np.inf).astype(np.float64, copy=False)
+    nearest = comm.allreduce(depth, "min")
+    candidate = hit & (depth <= nearest + tie * np.abs(nearest))
+    winner = comm.allreduce(np.where(candidate, hit_keys, NO_HIT), "min")
+    won = np.flatnonzero(candidate & (hit_keys == winner))
+    sent = (won, {name: buffers[name][won] for name in layout if name in buffers})
+    received = comm.gather_object(None if comm.rank == target else sent, target)
+    out = None
+    if comm.rank == target:
+        # The root's own arrays already hold its hits and its misses; where another rank
+        # won, that rank's values replace the root's.
+        out = {}
+        for name, (dtype, row) in layout.items():
+            values = buffers.get(name)
+            if values is None:
+                values = np.full((len(hit_keys), *row), _missing(name, dtype), dtype)
+            values = values.astype(dtype, copy=False)
+            for rank, message in enumerate(received):
+                if rank != target:
+                    indices, arrays = message
+                    values[indices] = arrays[name] if name in arrays else _missing(name, dtype)
+            out[name] = values
+    if root is None:
+        out = {
+            name: comm.broadcast(out[name] if comm.rank == target else np.empty((len(hit_keys), *row), dtype), target)
+            for name, (dtype, row) in layout.items()
+        }
+    return out

@@ -149,6 +149,7 @@ class Scene:
         if comm is not None and threads is None:
             threads = default_threads(comm)
         self._threads = threads
+        self._keys: np.ndarray | None = None  # each triangle's global key, for casts under MPI
         self._mesh = prepare_mesh(mesh)
         points, triangles = self._mesh.points, self._mesh.triangles
         self._core = _core.Scene(points, triangles, _threads(threads), bool(bvh))
@@ -267,7 +268,7 @@ class Scene:
         # Every rank's names and array layouts, merged in rank order: a rank may lack a
         # mesh array (an empty piece has none) and still take part.
         merged: dict[str, tuple] = {}
-        for rank_names, rank_layout in comm.gather_object((names, layout)):
+        for rank_names, rank_layout in comm.gather_object((names, layout), None):
             for name in rank_names:
                 merged.setdefault(name, rank_layout.get(name) or row_layout(found, name, real))
         local = [name for name in merged if name in GEOMETRY_ARRAYS or name in found.point or name in found.cell]
@@ -276,7 +277,9 @@ class Scene:
         options.pop("world_space", None)
         _, buffers = self._cast_into(None, camera, arrays=needed, **options)
         triangle = buffers["TriangleId"]
-        keys = triangle_keys(self._mesh.cell_ids, self._mesh.global_cell_ids, comm.rank)
+        if self._keys is None:  # (once per scene: a pass over every triangle)
+            self._keys = triangle_keys(self._mesh.cell_ids, self._mesh.global_cell_ids, comm.rank)
+        keys = self._keys
         hit_keys = np.where(triangle >= 0, keys[np.maximum(triangle, 0)] if len(keys) else NO_HIT, NO_HIT)
         if self._mesh.global_cell_ids is not None and "CellId" in buffers:
             cells = buffers["CellId"]
