@@ -394,7 +394,7 @@ def pvbatch_mpi_runs(paraview_path, tmp_path_factory):
         command = [str(mpirun), "--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "-np", str(n)]
         done = subprocess.run(
             [*command, PVBATCH, str(MPI_SCRIPT), str(tmp / f"plan{n}.json")],
-            cwd=tmp, env=env, capture_output=True, text=True, timeout=600, check=False,
+            cwd=tmp, env=env, capture_output=True, text=True, timeout=180, check=False,
         )  # fmt: skip
         assert done.returncode == 0, f"mpirun -np {n} pvbatch failed:\n{done.stdout}\n{done.stderr}"
         assert "leaked" not in done.stderr, done.stderr  # exits cleanly

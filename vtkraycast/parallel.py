@@ -56,8 +56,6 @@ class VtkController:
 
     def gather_object(self, value: Any, root: int | None = None) -> list[Any] | None:
         """Every rank's ``value``, in rank order, on ``root`` (every rank when None)."""
-        from vtkmodules.vtkCommonCore import vtkSignedCharArray
-
         if root is None:
             return [self._broadcast_object(value if r == self.rank else None, r) for r in range(self.size)]
         if self.rank != root:
@@ -68,15 +66,13 @@ class VtkController:
             if r == root:
                 values.append(value)
                 continue
-            message = vtkSignedCharArray()
+            message = _pickled(None).NewInstance()  # (the sender's array type)
             self._controller.Receive(message, r, _TAG)
             values.append(_unpickled(message))
         return values
 
     def _broadcast_object(self, value: Any, root: int) -> Any:
-        from vtkmodules.vtkCommonCore import vtkSignedCharArray
-
-        message = _pickled(value) if self.rank == root else vtkSignedCharArray()
+        message = _pickled(value) if self.rank == root else _pickled(None).NewInstance()
         self._controller.Broadcast(message, root)
         return value if self.rank == root else _unpickled(message)
 
