@@ -16,6 +16,7 @@
 #include <string>
 #include <thread>
 
+#include "all_hits.hpp"
 #include "bvh.hpp"
 #include "camera_rays.hpp"
 #include "kernel_cramer.hpp"
@@ -361,6 +362,40 @@ NB_MODULE(_core, m) {
             },
             "values"_a, "out"_a, "per_point"_a,
             "Gathers a mesh array at the hits into `out`: a point array interpolated, a cell array by the hit cell.");
+    m.def(
+        "intersect_all",
+        [](const vrc::Scene& scene, Points origins, Points directions, double tmin, double tmax, int threads) {
+            if (origins.shape(0) != directions.shape(0)) throw std::invalid_argument("origins and directions differ in length");
+            if (!scene.has_bvh()) throw std::invalid_argument("every hit needs a scene with a BVH");
+            std::vector<vrc::RayHit> hits;
+            {
+                nb::gil_scoped_release release;
+                hits = vrc::all_hits(scene, vrc::ArrayRays(origins.data(), directions.data(), origins.shape(0), tmin, tmax),
+                                     resolve_threads(threads));
+            }
+            const std::size_t n = hits.size();
+            auto* ray = new int64_t[n];
+            auto* triangle = new int64_t[n];
+            auto* facing = new int8_t[n];
+            auto* t = new double[n];
+            auto* b = new double[3 * n];
+            for (std::size_t i = 0; i < n; ++i) {
+                ray[i] = int64_t(hits[i].ray);
+                triangle[i] = hits[i].triangle;
+                facing[i] = int8_t(hits[i].facing);
+                t[i] = hits[i].t;
+                for (int c = 0; c < 3; ++c) b[3 * i + c] = hits[i].b[c];
+            }
+            const auto owned = [](auto* data, std::size_t rows, std::size_t width) {
+                using T = std::remove_pointer_t<decltype(data)>;
+                nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<T*>(p); });
+                const std::size_t shape[2] = {rows, width};
+                return nb::ndarray<nb::numpy, T>(data, width == 1 ? 1 : 2, shape, owner);
+            };
+            return nb::make_tuple(owned(ray, n, 1), owned(triangle, n, 1), owned(facing, n, 1), owned(t, n, 1), owned(b, n, 3));
+        },
+        "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "threads"_a,
+        "Every hit in [tmin, tmax]: (ray, input triangle, facing +1/-1, t, weights), unsorted.");
     m.def(
         "ray_extent",
         [](Points origins, Points directions, int threads) {

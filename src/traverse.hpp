@@ -95,8 +95,9 @@ inline void test_triangle(const Kernel& kernel, const Scene& scene, uint32_t i, 
 }
 
 /// What a traversal looks for: the closest hit (ties to the lowest input triangle index),
-/// or any hit in [tmin, tmax], returned as soon as one is found (occlusion queries).
-enum class HitPolicy { closest, any };
+/// any hit in [tmin, tmax], returned as soon as one is found (occlusion queries), or every
+/// hit in [tmin, tmax], each handed to a sink (all_hits.hpp).
+enum class HitPolicy { closest, any, all };
 
 /// The seed lecture's method (accel = "none"): the whole model's bounding sphere, then its
 /// bounding box, then every triangle. Ties go to the lowest input triangle index.

@@ -108,14 +108,21 @@ class DoubleLanes {
     double tmin_;
 };
 
+/// Where hits go with a policy that keeps none (closest, any).
+struct NoSink {
+    template <class Real>
+    void operator()(uint32_t, double, const Real*) const {}
+};
+
 /// Closest hit (or with HitPolicy::any, any hit) along `ray` in [tmin, tmax] through the
 /// wide BVH, children visited nearest first. Ties go to the lowest input triangle index
 /// (test_triangle), so the answer is the binary traversal's, whatever the order. The
 /// watertight kernel meets only the triangles TriangleFilter leaves (its verdicts are that
 /// kernel's); the other strategies meet every triangle, so their own errors stay theirs.
-template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Lanes>
-Hit<Real> wide_hit(const Scene& scene, const Ray& ray, const Kernel<Real>& kernel, const Lanes& lanes) {
+template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Lanes, class Sink>
+Hit<Real> wide_hit(const Scene& scene, const Ray& ray, const Kernel<Real>& kernel, const Lanes& lanes, Sink& sink) {
     constexpr bool kFiltered = std::is_same_v<Kernel<Real>, Watertight<Real>>;
+    static_assert(kPolicy != HitPolicy::all || kFiltered, "every hit is found with the watertight kernel");
     struct NoFilter {
         explicit NoFilter(const Ray&) {}
     };
@@ -159,6 +166,13 @@ Hit<Real> wide_hit(const Scene& scene, const Ray& ray, const Kernel<Real>& kerne
             if constexpr (kFiltered) {
                 for (uint32_t i = next.child, end = next.child + next.count; i < end; i += 4) {
                     for (unsigned m = filter.candidates(scene, i, std::min(4u, end - i), ray.tmin, bound); m; m &= m - 1) {
+                        if constexpr (kPolicy == HitPolicy::all) {
+                            double t;
+                            Real b[3];
+                            const uint32_t k = i + __builtin_ctz(m);
+                            if (kernel.test(scene, k, ray.tmin, bound, t, b)) sink(k, t, b);
+                            continue;
+                        }
                         test_triangle(kernel, scene, i + __builtin_ctz(m), ray.tmin, bound, hit);
                         if (kPolicy == HitPolicy::any && hit.found()) return hit;
                     }
@@ -174,13 +188,15 @@ Hit<Real> wide_hit(const Scene& scene, const Ray& ray, const Kernel<Real>& kerne
 }
 
 /// The traversal for one ray: float lanes when its numbers allow, double lanes otherwise.
-template <template <class> class Kernel, class Real, HitPolicy kPolicy = HitPolicy::closest>
-Hit<Real> trace_ray(const Scene& scene, const Ray& ray, const CastContext& context) {
+/// With HitPolicy::all, `sink(i, t, b)` receives every hit (triangle i in leaf order) and
+/// the returned hit is empty. (Every hit needs the filtered watertight kernel.)
+template <template <class> class Kernel, class Real, HitPolicy kPolicy = HitPolicy::closest, class Sink = NoSink>
+Hit<Real> trace_ray(const Scene& scene, const Ray& ray, const CastContext& context, Sink&& sink = Sink{}) {
     if (scene.wide.empty()) return Hit<Real>{};
     const Kernel<Real> kernel(ray, context);
     FloatLanes fast;
-    if (fast.setup(ray, scene.anchor)) return wide_hit<Kernel, Real, kPolicy>(scene, ray, kernel, fast);
-    return wide_hit<Kernel, Real, kPolicy>(scene, ray, kernel, DoubleLanes(ray, scene.anchor));
+    if (fast.setup(ray, scene.anchor)) return wide_hit<Kernel, Real, kPolicy>(scene, ray, kernel, fast, sink);
+    return wide_hit<Kernel, Real, kPolicy>(scene, ray, kernel, DoubleLanes(ray, scene.anchor), sink);
 }
 
 }  // namespace vrc

@@ -13,6 +13,7 @@ from vtkmodules.vtkCommonDataModel import vtkImageData
 
 from . import _core
 from .camera import Camera
+from .crossings import crossings
 from .fields import GEOMETRY_ARRAYS, allocate, mesh_arrays, output_bytes, request_outputs, row_layout, select_arrays
 from .image import fill_image
 from .magnitudes import direction_shifts, scene_scale, shift_lengths
@@ -150,6 +151,7 @@ class Scene:
             threads = default_threads(comm)
         self._threads = threads
         self._keys: np.ndarray | None = None  # each triangle's global key, for casts under MPI
+        self._closed: bool | None = None  # whether every edge has an even number of triangles
         self._mesh = prepare_mesh(mesh)
         points, triangles = self._mesh.points, self._mesh.triangles
         self._core = _core.Scene(points, triangles, _threads(threads), bool(bvh))
@@ -452,6 +454,105 @@ class Scene:
         _core.cast(self._core, request)
         return mask.view(bool).reshape(shape)
 
+    def intersect_all(
+        self, origins: Any, directions: Any, *, tmin: float = 0.0, tmax: float = math.inf, threads: int | None = None
+    ) -> dict[str, np.ndarray]:
+        """Every surface crossing along each ray within ``tmin <= t <= tmax``, sorted by t, in
+        a flat layout like Open3D's ``list_intersections``: ray ``i``'s crossings are rows
+        ``ray_splits[i]:ray_splits[i + 1]`` of ``ray_ids``, ``triangle_id``, ``cell_id``,
+        ``t`` and ``barycentric`` (rays are the flattened batch of ``origins`` and
+        ``directions``, shapes ``(..., 3)`` broadcast as in :meth:`intersect`).
+
+        Decided exactly (the watertight test in double with exact edge signs). A ray through
+        an edge or a vertex the triangles share crosses the surface there once and is
+        reported once, by the lowest of the triangles that face it the same way; a ray
+        grazing a fold (the triangles around the point face it both ways) is reported twice
+        there, in and out. Triangles must share their points (``clean()`` merges duplicates).
+
+        Examples
+        --------
+        >>> import pyvista as pv
+        >>> import vtkraycast as vrc
+        >>> scene = vrc.Scene(pv.Cube())
+        >>> hits = scene.intersect_all([[0, 0, -2], [0.5, 0.5, -2]], [0, 0, 1])
+        >>> hits["ray_splits"].tolist(), hits["t"].tolist()  # the second ray meets an edge
+        ([0, 2, 4], [1.5, 2.5, 1.5, 2.5])
+        """
+        request, _, (k, j) = self._ray_request(
+            origins, directions, tmin, tmax, "watertight", "float64", "bvh", threads, False
+        )
+        n = request.origins.shape[0]
+        ray, triangle, facing, t, weights = _core.intersect_all(
+            self._core, request.origins, request.directions, request.tmin, request.tmax, request.threads
+        )
+        kept = crossings(self._mesh.triangles, ray, triangle, facing, t, weights)
+        ray, triangle, t, weights = ray[kept], triangle[kept], t[kept], weights[kept]
+        shift_lengths(t, (k - j[ray]) if np.ndim(j) else k - j, "t")
+        return {
+            "ray_splits": np.searchsorted(ray, np.arange(n + 1)).astype(np.int64),
+            "ray_ids": ray,
+            "triangle_id": triangle,
+            "cell_id": self._mesh.cell_ids[triangle],
+            "t": t,
+            "barycentric": weights + 0.0,  # (-0.0, from a back-facing triangle's division, to 0.0)
+        }
+
+    def count_intersections(
+        self, origins: Any, directions: Any, *, tmin: float = 0.0, tmax: float = math.inf, threads: int | None = None
+    ) -> np.ndarray:
+        """Surface crossings along each ray (as :meth:`intersect_all` counts them): an int64
+        array of the broadcast batch shape.
+
+        Examples
+        --------
+        >>> import pyvista as pv
+        >>> import vtkraycast as vrc
+        >>> vrc.Scene(pv.Sphere()).count_intersections([0, 0, -2], [[0, 0, 1], [0, 1, 0]]).tolist()
+        [2, 0]
+        """
+        hits = self.intersect_all(origins, directions, tmin=tmin, tmax=tmax, threads=threads)
+        counts = np.diff(hits["ray_splits"])
+        return counts.reshape(_batch_shape(origins, directions))
+
+    def contains(self, points: Any, *, threads: int | None = None) -> np.ndarray:
+        """Whether each point lies inside the closed surface: a bool array of the batch shape
+        of ``points`` (``(..., 3)``).
+
+        Exact for every point not on the surface, whatever its alignment with vertices and
+        edges and whatever the triangles' orientation: the parity of the surface crossings
+        (:meth:`intersect_all`) along a ray from the point. Points on the surface count as
+        inside. The mesh must be closed (every edge shared by an even number of triangles),
+        else a ValueError: inside has no meaning for an open surface.
+
+        Examples
+        --------
+        >>> import pyvista as pv
+        >>> import vtkraycast as vrc
+        >>> vrc.Scene(pv.Cube()).contains([[0, 0, 0], [0.5, 0.5, 0.5], [0.6, 0, 0]]).tolist()
+        [True, True, False]
+        """
+        self._check_closed()
+        points = np.asarray(points, dtype=np.float64)
+        # (any direction gives the same answer; one in no face's plane of common meshes)
+        direction = np.array([0.5773502691896257, 0.5773502691896258, 0.5773502691896256])
+        hits = self.intersect_all(points, direction, threads=threads)
+        counts = np.diff(hits["ray_splits"])
+        on_surface = np.zeros(counts.shape, bool)
+        on_surface[hits["ray_ids"][hits["t"] == 0]] = True
+        return ((counts % 2 == 1) | on_surface).reshape(_batch_shape(points, direction))
+
+    def _check_closed(self) -> None:
+        if self._closed is None:
+            triangles = self._mesh.triangles.astype(np.int64)
+            edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+            _, counts = np.unique(edges, axis=0, return_counts=True)
+            self._closed = bool((counts % 2 == 0).all())
+        if not self._closed:
+            raise ValueError(
+                "contains needs a closed surface (every edge shared by an even number of triangles); "
+                "this mesh has boundary edges (pyvista's clean() merges duplicate points)"
+            )
+
     def _ray_request(
         self,
         origins: Any,
@@ -498,6 +599,10 @@ def _ray_arrays(arrays: Iterable[str] | str | None, composite: bool) -> list[str
         if name == "composite_index" and not composite:
             raise ValueError("composite_index exists for scenes of composite inputs (pyvista.MultiBlock, ...) only")
     return list(dict.fromkeys(names))
+
+
+def _batch_shape(origins: Any, directions: Any) -> tuple[int, ...]:
+    return np.broadcast_shapes(np.shape(origins)[:-1], np.shape(directions)[:-1])
 
 
 def _batched(values: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:

@@ -1,0 +1,117 @@
+"""Every crossing along a ray, crossing counts and inside/outside (Scene.intersect_all,
+count_intersections, contains): exact on rays through every vertex and edge of closed
+meshes, against geometry (a convex mesh is crossed twice by any line through its
+interior), libigl's winding number and Open3D."""
+
+from __future__ import annotations
+
+import igl
+import numpy as np
+import pytest
+import pyvista as pv
+
+import vtkraycast as vrc
+from vtkraycast.testing import bumpy_sphere
+
+
+def _icosphere(offset: float = 0.0, scale: float = 1.0) -> pv.PolyData:
+    mesh = pv.Icosphere(radius=scale, nsub=2)
+    mesh.points += offset
+    return mesh
+
+
+@pytest.mark.parametrize(("offset", "scale"), [(0.0, 1.0), (1e6, 1.0), (0.0, 1e-6), (1e3, 1e4)])
+def test_lines_through_every_vertex_and_edge_cross_a_convex_mesh_twice(offset, scale):
+    mesh = _icosphere(offset, scale)
+    scene = vrc.Scene(mesh)
+    points = mesh.points.astype(np.float64)
+    edges = mesh.extract_all_edges().lines.reshape(-1, 3)[:, 1:]
+    targets = np.concatenate((points, (points[edges[:, 0]] + points[edges[:, 1]]) / 2))
+    centre = np.full(3, offset)
+    origins = centre + 3 * (targets - centre)  # outside, aimed through the target at the centre
+    counts = scene.count_intersections(origins, targets - origins)
+    assert (counts == 2).all(), np.unique(counts, return_counts=True)
+    hits = scene.intersect_all(origins, targets - origins)
+    t = hits["t"]
+    first = hits["ray_splits"][:-1]
+    # the first crossing is at the target (t = 1, the vertex or edge point itself)
+    np.testing.assert_allclose(t[first], 1.0, rtol=1e-9)
+    assert (np.diff(t)[np.diff(hits["ray_ids"]) == 0] >= 0).all()  # sorted by t within a ray
+
+
+def test_crossings_carry_their_triangle_cell_and_weights():
+    mesh = bumpy_sphere(3)
+    scene = vrc.Scene(mesh)
+    rng = np.random.default_rng(3)
+    origins = rng.uniform(-2, 2, (500, 3))
+    directions = rng.normal(size=(500, 3))
+    hits = scene.intersect_all(origins, directions)
+    tri = scene.prepared.triangles[hits["triangle_id"]]
+    corners = scene.prepared.points[tri]
+    from_weights = np.einsum("nk,nkc->nc", hits["barycentric"], corners)
+    along_ray = origins[hits["ray_ids"]] + hits["t"][:, None] * directions[hits["ray_ids"]]
+    np.testing.assert_allclose(from_weights, along_ray, atol=1e-9)
+    np.testing.assert_array_equal(hits["cell_id"], scene.prepared.cell_ids[hits["triangle_id"]])
+    # the first crossing is intersect's closest hit
+    closest = scene.intersect(origins, directions)
+    has = np.diff(hits["ray_splits"]) > 0
+    np.testing.assert_array_equal(closest["triangle_id"] >= 0, has)
+    np.testing.assert_array_equal(hits["t"][hits["ray_splits"][:-1][has]], closest["t"][has])
+    # rays from the inside of a closed surface cross it an odd number of times
+    inside = scene.contains(origins)
+    np.testing.assert_array_equal(scene.count_intersections(origins, directions) % 2 == 1, inside)
+
+
+def test_counts_agree_with_open3d():
+    o3d = pytest.importorskip("open3d")
+    mesh = bumpy_sphere(4)
+    scene = vrc.Scene(mesh)
+    rng = np.random.default_rng(5)
+    origins = rng.uniform(-2, 2, (20000, 3))
+    directions = rng.normal(size=(20000, 3))
+    ours = scene.count_intersections(origins, directions)
+    peer = o3d.t.geometry.RaycastingScene()
+    peer.add_triangles(o3d.core.Tensor(scene.prepared.points.astype(np.float32)),
+                       o3d.core.Tensor(scene.prepared.triangles.astype(np.uint32)))  # fmt: skip
+    theirs = peer.count_intersections(o3d.core.Tensor(np.hstack((origins, directions)).astype(np.float32))).numpy()
+    assert (ours == theirs).mean() > 0.999  # (Open3D rounds rays and points to float32)
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_contains_equals_libigl_winding_number(flip):
+    mesh = bumpy_sphere(3)
+    if flip:
+        mesh = mesh.copy()
+        mesh.flip_faces(inplace=True)
+    scene = vrc.Scene(mesh)
+    points, triangles = scene.prepared.points, scene.prepared.triangles.astype(np.int64)
+    rng = np.random.default_rng(8)
+    queries = np.concatenate((
+        rng.uniform(-1.5, 1.5, (3000, 3)),
+        points * 0.999, points * 1.001,  # beside every vertex, inside and out
+        points + np.array([0.0, 0.0, 0.01]),  # aligned with vertices along the axes
+        points[triangles].mean(axis=1) * 1.0001,
+    ))  # fmt: skip
+    winding = igl.winding_number(points, triangles, queries)
+    expected = np.abs(winding) > 0.5
+    np.testing.assert_array_equal(scene.contains(queries), expected)
+
+
+def test_contains_on_a_grid_aligned_with_the_mesh():
+    # a cube of unit grid squares: query points on the same grid lines as its vertices,
+    # so every ray from them is aligned with the vertices in two of three coordinates
+    box = pv.Box(bounds=(0, 4, 0, 4, 0, 4), level=3).triangulate().clean()
+    scene = vrc.Scene(box)
+    grid = np.stack(np.meshgrid(*[np.arange(-1, 5.5, 0.5)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    inside = scene.contains(grid)
+    expected = ((grid >= 0) & (grid <= 4)).all(axis=1)  # on the surface counts as inside
+    np.testing.assert_array_equal(inside, expected)
+    assert inside.shape == (len(grid),)
+
+
+def test_contains_refuses_open_meshes_and_keeps_shapes():
+    with pytest.raises(ValueError, match="closed surface"):
+        vrc.Scene(pv.Plane()).contains([[0, 0, 0]])
+    scene = vrc.Scene(pv.Sphere())
+    assert scene.contains(np.zeros((2, 3, 3))).shape == (2, 3)
+    assert scene.count_intersections(np.zeros((4, 1, 3)), [[1, 0, 0], [0, 1, 0]]).shape == (4, 2)
