@@ -115,3 +115,72 @@ def test_contains_refuses_open_meshes_and_keeps_shapes():
     scene = vrc.Scene(pv.Sphere())
     assert scene.contains(np.zeros((2, 3, 3))).shape == (2, 3)
     assert scene.count_intersections(np.zeros((4, 1, 3)), [[1, 0, 0], [0, 1, 0]]).shape == (4, 2)
+
+
+CAMERA = vrc.Camera((0.2, -3.0, 0.5), (0, 0, 0), (0, 0, 1), nx=64, ny=48, view_angle=40)
+
+
+def test_layers_hold_the_crossings_in_order():
+    scene = vrc.Scene(bumpy_sphere(3))
+    layered = scene.cast(CAMERA, layers=3)
+    assert layered.dimensions == (64, 48, 3)
+    n = CAMERA.nx * CAMERA.ny
+    first = scene.cast(CAMERA)  # the core's ordinary cast: layer 0
+    for name in ("TriangleId", "CellId", "Depth", "Barycentric", "vtkValidPointMask"):
+        np.testing.assert_array_equal(layered[name][:n], first[name], err_msg=name)
+    origins, directions, tmin, tmax = CAMERA.rays()
+    hits = scene.intersect_all(origins, directions, tmin=tmin, tmax=tmax)
+    counts = np.diff(hits["ray_splits"])
+    for layer in (1, 2):
+        has = counts > layer
+        rows = hits["ray_splits"][:-1][has] + layer
+        ids = layered["TriangleId"][layer * n : (layer + 1) * n]
+        np.testing.assert_array_equal(ids[has], hits["triangle_id"][rows])
+        assert (ids[~has] == -1).all()
+        depth = layered["Depth"][layer * n : (layer + 1) * n]
+        np.testing.assert_array_equal(depth[has], hits["t"][rows] * CAMERA.d)
+    assert (layered["TriangleId"][n : 2 * n] >= 0).sum() > 1000  # the back of the sphere
+    with pytest.raises(ValueError, match="layers must be an integer"):
+        scene.cast(CAMERA, layers=0)
+
+
+def test_hit_count_and_thickness_of_a_box_and_a_bumpy_sphere():
+    box = pv.Box(bounds=(-0.5, 0.5, -0.5, 0.5, -0.5, 0.5), level=2).triangulate().clean()
+    camera = vrc.Camera((0.1, 0.05, 3.0), (0.1, 0.05, 0.0), (0, 1, 0), nx=40, ny=30, h=1.6, parallel=True)
+    image = vrc.Scene(box).cast(camera, arrays=["HitCount", "Thickness", "Depth"])
+    hit = np.isfinite(image["Depth"])
+    assert hit.mean() > 0.2 and image.array_names == ["Depth", "HitCount", "Thickness"]
+    np.testing.assert_array_equal(image["HitCount"], np.where(hit, 2, 0))
+    np.testing.assert_allclose(image["Thickness"][hit], 1.0, rtol=1e-12)  # the box is 1 deep
+    assert (image["Thickness"][~hit] == 0).all()
+    scene = vrc.Scene(bumpy_sphere(3))
+    image = scene.cast(CAMERA, arrays=["HitCount", "Thickness"])
+    origins, directions, tmin, tmax = CAMERA.rays()
+    counts = scene.count_intersections(origins, directions, tmin=tmin, tmax=tmax)
+    np.testing.assert_array_equal(image["HitCount"], counts)
+    inside_eye = vrc.Camera((0, 0, 0), (1, 0, 0), (0, 0, 1), nx=16, ny=16, view_angle=60)
+    from_inside = scene.cast(inside_eye, arrays=["HitCount", "Thickness"])  # the eye inside: odd counts
+    assert (from_inside["HitCount"] % 2 == 1).all() and (from_inside["Thickness"] > 0.5).all()
+
+
+def test_visible_cells_and_points_of_a_convex_mesh_face_the_eye():
+    mesh = pv.Icosphere(radius=1.0, nsub=3)
+    scene = vrc.Scene(mesh)
+    camera = vrc.Camera((0.3, -4.0, 1.0), (0, 0, 0), (0, 0, 1), nx=400, ny=400, view_angle=35)
+    points, faces = mesh.points.astype(np.float64), mesh.faces.reshape(-1, 4)[:, 1:]
+    corners = points[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    facing = np.einsum("ij,ij->i", normals, camera.eye - corners[:, 0]) > 0
+    cells = scene.visible_cells(camera)
+    assert np.isin(cells, np.flatnonzero(facing)).all()
+    assert len(cells) > 0.97 * facing.sum()  # (all but slivers at the silhouette)
+    seen = scene.visible_points(camera)
+    touching = np.zeros(len(points), bool)  # a vertex of some front-facing face
+    touching[faces[facing].ravel()] = True
+    surrounded = np.ones(len(points), bool)  # every face around it faces the eye
+    np.logical_and.at(surrounded, faces.ravel(), np.repeat(facing, 3))
+    assert np.isin(seen, np.flatnonzero(touching)).all()
+    assert np.isin(np.flatnonzero(surrounded), seen).all()
+    part = scene.extract_visible(camera)
+    assert part.n_cells == len(cells)
+    np.testing.assert_array_equal(np.sort(part["vtkOriginalCellIds"]), cells)

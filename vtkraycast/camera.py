@@ -214,6 +214,21 @@ class Camera:
             ]
         )
 
+    def rays(self) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """Every pixel's ray as the core builds it: origins and directions ``(nx * ny, 3)`` in
+        VTK image order (pixel ``(i, r)`` at ``i + r * nx``, row 0 at the bottom), and the
+        ``tmin, tmax`` of ``near`` and ``far``. A hit's Depth is ``t`` times ``d`` (pinhole)
+        or ``t`` (parallel)."""
+        i = np.tile(np.arange(self.nx), self.ny)
+        j = self.ny - 1 - np.repeat(np.arange(self.ny), self.nx)
+        x = -self.w * 0.5 + self.w / self.nx * (i + 0.5)
+        y = self.h * 0.5 - self.h / self.ny * (j + 0.5)
+        if self.parallel:
+            origins = self.eye + x[:, None] * self.right + y[:, None] * self.up
+            return origins, np.broadcast_to(-self.backward, origins.shape), self.near, self.far
+        directions = x[:, None] * self.right + y[:, None] * self.up + (-self.d) * self.backward
+        return np.broadcast_to(self.eye, directions.shape), directions, self.near / self.d, self.far / self.d
+
     @classmethod
     def from_vtk(cls, camera: Any, nx: int | None = None, ny: int | None = None) -> Camera:
         """The camera of a ``vtkCamera``, ``pyvista.Camera``, ``vtkRenderer`` or ``pyvista.Plotter``.

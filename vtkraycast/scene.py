@@ -19,6 +19,7 @@ from .image import fill_image
 from .magnitudes import direction_shifts, scene_scale, shift_lengths
 from .mesh import prepare_mesh
 from .parallel import NO_HIT, communicator, composite, default_threads, triangle_keys
+from .visibility import CROSSING_ARRAYS, crossing_arrays, layered_arrays, visible_points
 
 __all__ = ["PRECISIONS", "STRATEGIES", "Scene"]
 
@@ -195,8 +196,14 @@ class Scene:
             raise TypeError("buffers() places no image: world_space is an option of cast()")
         return self._cast_into(None, camera, **options)
 
-    def cast(self, camera: Camera | Any, *, root: int | None = 0, **options: Any) -> Any:
+    def cast(self, camera: Camera | Any, *, root: int | None = 0, layers: int = 1, **options: Any) -> Any:
         """Casts one ray per pixel of ``camera`` and returns the geometry buffer.
+
+        ``layers=k`` gives an image of dimensions ``(nx, ny, k)`` whose slice ``z = l`` holds
+        the ``(l + 1)``-th surface crossing along each pixel ray (:meth:`intersect_all`;
+        misses where a ray has fewer); ``layers=1`` is the ordinary cast. ``HitCount``
+        (crossings along the pixel ray within near and far) and ``Thickness`` (length inside
+        closed surfaces along it) are computed when named in ``arrays``.
 
         For a scene built with ``comm`` (MPI) the cast is collective: every rank casts its
         piece, and ``root`` receives the image of the whole mesh (every rank when None;
@@ -246,6 +253,12 @@ class Scene:
         """
         import pyvista as pv
 
+        camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
+        arrays = options.get("arrays")
+        wanted = [arrays] if isinstance(arrays, str) else list(arrays or [])
+        along = [name for name in wanted if name in CROSSING_ARRAYS]
+        if along or layers != 1:
+            return self._cast_crossings(camera, layers, wanted, along, options)
         if self._comm is not None:
             world_space = options.get("world_space", False)
             camera, arrays = self._cast_parallel(camera, root=root, **options)
@@ -253,6 +266,93 @@ class Scene:
         image = pv.ImageData()
         self._cast_into(image, camera, **options)
         return image
+
+    def _cast_crossings(self, camera: Camera, layers: int, wanted: list[str], along: list[str], options: dict) -> Any:
+        """A cast with depth layers or with arrays of every crossing (see :meth:`cast`)."""
+        import pyvista as pv
+
+        if not isinstance(layers, (int, np.integer)) or isinstance(layers, bool) or layers < 1:
+            raise ValueError(f"layers must be an integer >= 1, got {layers!r}")
+        if self._comm is not None:
+            raise ValueError("layers and HitCount / Thickness are not yet cast under MPI")
+        unknown = set(options) - {"arrays", "interpolate", "threads", "world_space", "precision", "strategy"}
+        if unknown:
+            raise ValueError(f"{', '.join(sorted(unknown))} not supported with layers or HitCount / Thickness")
+        rest = [name for name in wanted if name not in CROSSING_ARRAYS]
+        threads, interpolate = options.get("threads"), options.get("interpolate", True)
+        if layers == 1:
+            image = pv.ImageData()
+            if rest or not wanted:
+                self._cast_into(image, camera, **{**options, "arrays": rest or None})
+            else:
+                fill_image(image, camera, {}, world_space=options.get("world_space", False))
+            for name, values in crossing_arrays(self, camera, along, threads).items():
+                image.point_data[name] = values
+            return image
+        if along:
+            raise ValueError("HitCount and Thickness are per pixel ray: cast them with layers=1")
+        values = layered_arrays(self, camera, layers, rest or None, interpolate, threads)
+        image = fill_image(pv.ImageData(), camera, values, world_space=options.get("world_space", False))
+        image.SetDimensions(camera.nx, camera.ny, layers)
+        return image
+
+    def visible_cells(self, camera: Camera | Any, *, threads: int | None = None) -> np.ndarray:
+        """Ids of the input cells the camera sees (those some pixel ray hits first), sorted.
+
+        Examples
+        --------
+        >>> import pyvista as pv
+        >>> import vtkraycast as vrc
+        >>> cam = vrc.Camera((0, 0, 5), (0, 0, 0), (0, 1, 0), nx=64, ny=64, view_angle=30)
+        >>> ids = vrc.Scene(pv.Cube()).visible_cells(cam)
+        >>> ids.tolist()  # the cube's face towards +z
+        [5]
+        """
+        camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
+        image = self.cast(camera, arrays=["CellId"], threads=threads)
+        cells = np.asarray(image["CellId"])
+        return np.unique(cells[cells >= 0])
+
+    def visible_points(
+        self, camera: Camera | Any, *, tolerance: float = 1e-6, threads: int | None = None
+    ) -> np.ndarray:
+        """Ids of the mesh's points the camera sees, sorted: in the view and within near and
+        far, with nothing between the eye and the point closer than ``1 - tolerance`` of the
+        way (exact occlusion queries, :meth:`occluded`; the point's own triangles end at it).
+
+        Examples
+        --------
+        >>> import pyvista as pv
+        >>> import vtkraycast as vrc
+        >>> cam = vrc.Camera((0, 0, 5), (0, 0, 0), (0, 1, 0), nx=64, ny=64, view_angle=30)
+        >>> len(vrc.Scene(pv.Cube()).visible_points(cam))  # the four corners of the +z face
+        4
+        """
+        if not 0 <= tolerance < 1:
+            raise ValueError(f"tolerance must be in [0, 1), got {tolerance}")
+        camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
+        return visible_points(self, camera, float(tolerance), threads)
+
+    def extract_visible(self, camera: Camera | Any, *, threads: int | None = None) -> Any:
+        """The part of the mesh the camera sees: the cells :meth:`visible_cells` finds, with
+        their points and arrays, as a ``pyvista.UnstructuredGrid`` (``extract_cells`` of the
+        cast surface; ``vtkOriginalCellIds`` maps its cells back).
+
+        Examples
+        --------
+        >>> import pyvista as pv
+        >>> import vtkraycast as vrc
+        >>> cam = vrc.Camera((0, 0, 5), (0, 0, 0), (0, 1, 0), nx=64, ny=64, view_angle=30)
+        >>> vrc.Scene(pv.Sphere()).extract_visible(cam).n_cells < pv.Sphere().n_cells
+        True
+        """
+        import pyvista as pv
+
+        camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
+        image = self.cast(camera, arrays=["TriangleId"], threads=threads)
+        triangles = np.asarray(image["TriangleId"])
+        surface_cells = np.unique(self._mesh.surface_cell_ids[triangles[triangles >= 0]])
+        return pv.wrap(self._mesh.surface).extract_cells(surface_cells)
 
     def _cast_parallel(
         self, camera: Camera | Any, *, root: int | None, **options: Any
