@@ -35,6 +35,14 @@ using Points = nb::ndarray<const double, nb::shape<-1, 3>, nb::c_contig, nb::dev
 using Triangles = nb::ndarray<const uint32_t, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
 using IdsOut = nb::ndarray<int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
 
+/// A numpy array owning `data` (new[]), shape (rows) or (rows, width).
+template <class T>
+nb::ndarray<nb::numpy, T> owned_array(T* data, std::size_t rows, std::size_t width) {
+    nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<T*>(p); });
+    const std::size_t shape[2] = {rows, width};
+    return nb::ndarray<nb::numpy, T>(data, width == 1 ? 1 : 2, shape, owner);
+}
+
 unsigned resolve_threads(int threads) {
     if (threads < 0) throw std::invalid_argument("threads must be >= 1 (or None for all cores)");
     return threads == 0 ? std::max(1u, std::thread::hardware_concurrency()) : unsigned(threads);
@@ -364,38 +372,51 @@ NB_MODULE(_core, m) {
             "Gathers a mesh array at the hits into `out`: a point array interpolated, a cell array by the hit cell.");
     m.def(
         "intersect_all",
-        [](const vrc::Scene& scene, Points origins, Points directions, double tmin, double tmax, int threads) {
+        [](const vrc::Scene& scene, Points origins, Points directions, double tmin, double tmax, int threads,
+           bool counts_only) -> nb::object {
             if (origins.shape(0) != directions.shape(0)) throw std::invalid_argument("origins and directions differ in length");
-            if (!scene.has_bvh()) throw std::invalid_argument("every hit needs a scene with a BVH");
-            std::vector<vrc::RayHit> hits;
+            if (!scene.has_bvh()) throw std::invalid_argument("every crossing needs a scene with a BVH");
+            const std::size_t n = origins.shape(0);
+            const vrc::ArrayRays rays(origins.data(), directions.data(), n, tmin, tmax);
+            const unsigned n_threads = resolve_threads(threads);
+            if (counts_only) {  // crossings per ray, and whether one lies at the origin (t = 0)
+                auto* counts = new int64_t[n];
+                auto* at_origin = new uint8_t[n];
+                {
+                    nb::gil_scoped_release release;
+                    vrc::for_each_crossings(scene, rays, n_threads, [&](unsigned, std::size_t k, const std::vector<vrc::RayHit>& h) {
+                        counts[k] = int64_t(h.size());
+                        at_origin[k] = !h.empty() && h.front().t == 0;
+                    });
+                }
+                return nb::make_tuple(owned_array(counts, n, 1), owned_array(at_origin, n, 1));
+            }
+            std::vector<std::vector<vrc::RayHit>> parts(n_threads);
             {
                 nb::gil_scoped_release release;
-                hits = vrc::all_hits(scene, vrc::ArrayRays(origins.data(), directions.data(), origins.shape(0), tmin, tmax),
-                                     resolve_threads(threads));
+                vrc::for_each_crossings(scene, rays, n_threads, [&](unsigned part, std::size_t, const std::vector<vrc::RayHit>& h) {
+                    parts[part].insert(parts[part].end(), h.begin(), h.end());
+                });
             }
-            const std::size_t n = hits.size();
-            auto* ray = new int64_t[n];
-            auto* triangle = new int64_t[n];
-            auto* facing = new int8_t[n];
-            auto* t = new double[n];
-            auto* b = new double[3 * n];
-            for (std::size_t i = 0; i < n; ++i) {
+            std::vector<vrc::RayHit> hits;  // (the parts are slices of the rays, in order)
+            for (auto& part : parts) hits.insert(hits.end(), part.begin(), part.end());
+            const std::size_t m = hits.size();
+            auto* ray = new int64_t[m];
+            auto* triangle = new int64_t[m];
+            auto* t = new double[m];
+            auto* b = new double[3 * m];
+            for (std::size_t i = 0; i < m; ++i) {
                 ray[i] = int64_t(hits[i].ray);
                 triangle[i] = hits[i].triangle;
-                facing[i] = int8_t(hits[i].facing);
                 t[i] = hits[i].t;
-                for (int c = 0; c < 3; ++c) b[3 * i + c] = hits[i].b[c];
+                for (int c = 0; c < 3; ++c) b[3 * i + c] = hits[i].b[c] + 0.0;  // (no -0.0)
             }
-            const auto owned = [](auto* data, std::size_t rows, std::size_t width) {
-                using T = std::remove_pointer_t<decltype(data)>;
-                nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<T*>(p); });
-                const std::size_t shape[2] = {rows, width};
-                return nb::ndarray<nb::numpy, T>(data, width == 1 ? 1 : 2, shape, owner);
-            };
-            return nb::make_tuple(owned(ray, n, 1), owned(triangle, n, 1), owned(facing, n, 1), owned(t, n, 1), owned(b, n, 3));
+            return nb::make_tuple(owned_array(ray, m, 1), owned_array(triangle, m, 1), owned_array(t, m, 1),
+                                  owned_array(b, m, 3));
         },
-        "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "threads"_a,
-        "Every hit in [tmin, tmax]: (ray, input triangle, facing +1/-1, t, weights), unsorted.");
+        "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "threads"_a, "counts_only"_a,
+        "Every surface crossing in [tmin, tmax], sorted by ray then t: (ray, input triangle, t, weights); or, "
+        "with counts_only, (crossings per ray, whether one is at t = 0).");
     m.def(
         "ray_extent",
         [](Points origins, Points directions, int threads) {

@@ -13,7 +13,6 @@ from vtkmodules.vtkCommonDataModel import vtkImageData
 
 from . import _core
 from .camera import Camera
-from .crossings import crossings
 from .fields import GEOMETRY_ARRAYS, allocate, mesh_arrays, output_bytes, request_outputs, row_layout, select_arrays
 from .image import fill_image
 from .magnitudes import direction_shifts, scene_scale, shift_lengths
@@ -582,11 +581,7 @@ class Scene:
             origins, directions, tmin, tmax, "watertight", "float64", "bvh", threads, False
         )
         n = request.origins.shape[0]
-        ray, triangle, facing, t, weights = _core.intersect_all(
-            self._core, request.origins, request.directions, request.tmin, request.tmax, request.threads
-        )
-        kept = crossings(self._mesh.triangles, ray, triangle, facing, t, weights)
-        ray, triangle, t, weights = ray[kept], triangle[kept], t[kept], weights[kept]
+        ray, triangle, t, weights = self._crossings(request, counts_only=False)
         shift_lengths(t, (k - j[ray]) if np.ndim(j) else k - j, "t")
         return {
             "ray_splits": np.searchsorted(ray, np.arange(n + 1)).astype(np.int64),
@@ -594,8 +589,13 @@ class Scene:
             "triangle_id": triangle,
             "cell_id": self._mesh.cell_ids[triangle],
             "t": t,
-            "barycentric": weights + 0.0,  # (-0.0, from a back-facing triangle's division, to 0.0)
+            "barycentric": weights,
         }
+
+    def _crossings(self, request: _core.Request, *, counts_only: bool) -> tuple[np.ndarray, ...]:
+        return _core.intersect_all(
+            self._core, request.origins, request.directions, request.tmin, request.tmax, request.threads, counts_only
+        )
 
     def count_intersections(
         self, origins: Any, directions: Any, *, tmin: float = 0.0, tmax: float = math.inf, threads: int | None = None
@@ -610,9 +610,11 @@ class Scene:
         >>> vrc.Scene(pv.Sphere()).count_intersections([0, 0, -2], [[0, 0, 1], [0, 1, 0]]).tolist()
         [2, 0]
         """
-        hits = self.intersect_all(origins, directions, tmin=tmin, tmax=tmax, threads=threads)
-        counts = np.diff(hits["ray_splits"])
-        return counts.reshape(_batch_shape(origins, directions))
+        request, shape, _ = self._ray_request(
+            origins, directions, tmin, tmax, "watertight", "float64", "bvh", threads, False
+        )
+        counts, _ = self._crossings(request, counts_only=True)
+        return counts.reshape(shape)
 
     def contains(self, points: Any, *, threads: int | None = None) -> np.ndarray:
         """Whether each point lies inside the closed surface: a bool array of the batch shape
@@ -635,11 +637,11 @@ class Scene:
         points = np.asarray(points, dtype=np.float64)
         # (any direction gives the same answer; one in no face's plane of common meshes)
         direction = np.array([0.5773502691896257, 0.5773502691896258, 0.5773502691896256])
-        hits = self.intersect_all(points, direction, threads=threads)
-        counts = np.diff(hits["ray_splits"])
-        on_surface = np.zeros(counts.shape, bool)
-        on_surface[hits["ray_ids"][hits["t"] == 0]] = True
-        return ((counts % 2 == 1) | on_surface).reshape(_batch_shape(points, direction))
+        request, shape, _ = self._ray_request(
+            points, direction, 0.0, math.inf, "watertight", "float64", "bvh", threads, False
+        )
+        counts, on_surface = self._crossings(request, counts_only=True)
+        return ((counts % 2 == 1) | on_surface.view(bool)).reshape(shape)
 
     def _check_closed(self) -> None:
         if self._closed is None:
@@ -699,10 +701,6 @@ def _ray_arrays(arrays: Iterable[str] | str | None, composite: bool) -> list[str
         if name == "composite_index" and not composite:
             raise ValueError("composite_index exists for scenes of composite inputs (pyvista.MultiBlock, ...) only")
     return list(dict.fromkeys(names))
-
-
-def _batch_shape(origins: Any, directions: Any) -> tuple[int, ...]:
-    return np.broadcast_shapes(np.shape(origins)[:-1], np.shape(directions)[:-1])
 
 
 def _batched(values: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
