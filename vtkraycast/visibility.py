@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .fields import GEOMETRY_ARRAYS, mesh_arrays, select_arrays
-from .testing import reference_arrays
 
 if TYPE_CHECKING:
     from .camera import Camera
@@ -63,6 +62,8 @@ def layered_arrays(
 ) -> dict[str, np.ndarray]:
     """The arrays of a cast with ``layers`` depth layers: rows ``l * nx * ny + pixel`` hold
     the (l + 1)-th crossing along each pixel ray (misses where it has fewer)."""
+    from .testing import reference_arrays  # (numpy gathers of the mesh's arrays; imports pyvista)
+
     found = mesh_arrays(scene.prepared)
     names = [n for n in select_arrays(found, arrays, interpolate) if n not in CROSSING_ARRAYS]
     hits, _, depth_per_t = _pixel_crossings(scene, camera, threads)
