@@ -129,7 +129,7 @@ struct FieldRequest {
 /// it field by field, so new options do not lengthen a call.
 struct Request {
     std::optional<Frame> frame;  ///< camera: rows eye, right, up, backward
-    double d = 1, width = 1, height = 1, near = 0, far = HUGE_VAL;
+    double d = 1, width = 1, height = 1, near = 0, far = HUGE_VAL, shift_x = 0, shift_y = 0;
     int64_t nx = 1, ny = 1;
     bool parallel = false;
     std::optional<Points> origins, directions;  ///< arrays of rays, instead of a camera
@@ -240,6 +240,7 @@ vrc::CameraRays camera_rays(const vrc::Scene& scene, const Request& q) {
         spec.w[k] = (*q.frame)(3, k);
     }
     spec.d = q.d, spec.width = q.width, spec.height = q.height, spec.near = q.near, spec.far = q.far;
+    spec.shift_x = q.shift_x, spec.shift_y = q.shift_y;
     spec.nx = q.nx, spec.ny = q.ny, spec.parallel = q.parallel;
     if (q.nx < 1 || q.ny < 1) throw std::invalid_argument("nx and ny must be >= 1");
     if (!scene.has_bvh() && q.accel != "none" && !vrc::CameraCast::fits(spec))
@@ -334,6 +335,8 @@ NB_MODULE(_core, m) {
         .def_rw("frame", &Request::frame, nb::arg().none())
         .def_rw("d", &Request::d)
         .def_rw("width", &Request::width)
+        .def_rw("shift_x", &Request::shift_x)
+        .def_rw("shift_y", &Request::shift_y)
         .def_rw("height", &Request::height)
         .def_rw("near", &Request::near)
         .def_rw("far", &Request::far)

@@ -16,13 +16,15 @@ namespace vrc {
 struct CameraSpec {
     double eye[3], u[3], v[3], w[3];
     double d, width, height, near, far;
+    double shift_x, shift_y;  ///< the window's centre on the image plane (right, up of the view axis)
     int64_t nx, ny;
     bool parallel;
 };
 
 /// One ray per pixel. Pixel (i, r) is output element i + r nx, row r = 0 at the bottom
 /// (VTK image order); its centre is the seed's formula with j = ny - 1 - r counted from
-/// the top: x = -w/2 + w/nx (i + 1/2), y = h/2 - h/ny (j + 1/2), z = -d.
+/// the top: x = sx - w/2 + w/nx (i + 1/2), y = sy + h/2 - h/ny (j + 1/2), z = -d, with
+/// (sx, sy) the window's shift (an off-centre principal point; 0 for the seed's camera).
 /// Perspective rays start at the eye with direction P_ij, so t = 1 is the image plane and
 /// depth = t d. Parallel rays start at (x, y, 0) with direction (0, 0, -1): depth = t.
 class CameraRays {
@@ -41,8 +43,8 @@ class CameraRays {
     [[nodiscard]] Ray ray(int64_t i, int64_t r) const {
         const int64_t j = c_.ny - 1 - r;
         // (divisions done once, in the constructor: the same values)
-        const double x = -c_.width * 0.5 + pitch_x_ * (double(i) + 0.5);
-        const double y = c_.height * 0.5 - pitch_y_ * (double(j) + 0.5);
+        const double x = (c_.shift_x - c_.width * 0.5) + pitch_x_ * (double(i) + 0.5);
+        const double y = (c_.shift_y + c_.height * 0.5) - pitch_y_ * (double(j) + 0.5);
         Ray ray;
         ray.tmin = tmin_;
         ray.tmax = tmax_;
@@ -104,6 +106,8 @@ class CameraRays {
         PixelMap m{};
         const double nx = double(c_.nx), ny = double(c_.ny), eps = std::numeric_limits<double>::epsilon();
         const double per_x = nx / c_.width, per_y = ny / c_.height;  // pixels per unit of the image plane
+        // pixel coordinates of the view axis: the window's centre, shifted
+        const double axis_col = nx * 0.5 - 0.5 - per_x * c_.shift_x, axis_row = ny * 0.5 - 0.5 - per_y * c_.shift_y;
         for (int k = 0; k < 3; ++k) {
             m.depth[k] = -c_.w[k];
             if (c_.parallel) {
@@ -111,21 +115,22 @@ class CameraRays {
                 m.row[k] = per_y * c_.v[k];
                 m.den[k] = 0;
             } else {
-                m.col[k] = c_.d * per_x * c_.u[k] - (nx * 0.5 - 0.5) * c_.w[k];
-                m.row[k] = c_.d * per_y * c_.v[k] - (ny * 0.5 - 0.5) * c_.w[k];
+                m.col[k] = c_.d * per_x * c_.u[k] - axis_col * c_.w[k];
+                m.row[k] = c_.d * per_y * c_.v[k] - axis_row * c_.w[k];
                 m.den[k] = -c_.w[k];
             }
         }
         const double per = std::max(per_x, per_y);
         const double eye = std::max(std::fabs(c_.eye[0]), std::max(std::fabs(c_.eye[1]), std::fabs(c_.eye[2])));
+        const double window = c_.width + c_.height + std::fabs(c_.shift_x) + std::fabs(c_.shift_y);
         if (c_.parallel) {
-            m.col0 = nx * 0.5 - 0.5;
-            m.row0 = ny * 0.5 - 0.5;
+            m.col0 = axis_col;
+            m.row0 = axis_row;
             m.den0 = 1;
-            m.margin = 1e-3 + 64 * eps * (eye + c_.width + c_.height) * per;
+            m.margin = 1e-3 + 64 * eps * (eye + window) * per;
         } else {
             m.col0 = m.row0 = m.den0 = 0;
-            const double scale = c_.width + c_.height + c_.d;
+            const double scale = window + c_.d;
             m.margin = 1e-3 + 64 * eps * scale * per + 1e4 * eps * (nx + ny) * (1 + c_.d * per);
         }
         return m;
@@ -162,8 +167,8 @@ class CameraRays {
                 y *= c_.d / depth[corner];
             }
             // pixel coordinates: column i, and row r counted from the bottom
-            const double i = (x + c_.width * 0.5) / pitch_x_ - 0.5;
-            const double r = (y + c_.height * 0.5) / pitch_y_ - 0.5;
+            const double i = (x - c_.shift_x + c_.width * 0.5) / pitch_x_ - 0.5;
+            const double r = (y - c_.shift_y + c_.height * 0.5) / pitch_y_ - 0.5;
             lo_i = std::min(lo_i, i), hi_i = std::max(hi_i, i);
             lo_r = std::min(lo_r, r), hi_r = std::max(hi_r, r);
         }

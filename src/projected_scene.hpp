@@ -169,7 +169,8 @@ class ProjectedScene {
         }
         // (a parallel ray's origin leaves the eye plane by its own rounding)
         const double eye = std::max(std::fabs(c.eye[0]), std::max(std::fabs(c.eye[1]), std::fabs(c.eye[2])));
-        depth_slack_ = 16 * kEps * (depth_size + (c.parallel ? eye + c.width + c.height : 0));
+        const double window = c.width + c.height + std::fabs(c.shift_x) + std::fabs(c.shift_y);
+        depth_slack_ = 16 * kEps * (depth_size + (c.parallel ? eye + window : 0));
         // The projection's own margin (a parallel one's rounding grows with |P - eye|), plus
         // the single-precision roundings of a column or row (stored, then less the margin)
         // that can fall in the image: one farther out clamps to the border whatever its

@@ -76,6 +76,9 @@ class Camera:
     near, far : float, default: 0, inf
         Accepted hit depths along the view direction. ``near=d`` is the seed's rule that
         hits in front of the image plane are outside the frustum.
+    shift : sequence of 2 float, default: (0, 0)
+        The window's centre on the image plane, right and up of the view axis (same units
+        as ``w`` and ``h``): an off-centre principal point (see :meth:`from_intrinsics`).
 
     Examples
     --------
@@ -91,7 +94,7 @@ class Camera:
     ValueError: view_up is parallel to the view direction ...
     """
 
-    _FIELDS = ("eye", "look_at", "view_up", "d", "w", "h", "nx", "ny", "parallel", "near", "far")
+    _FIELDS = ("eye", "look_at", "view_up", "d", "w", "h", "nx", "ny", "parallel", "near", "far", "shift")
 
     def __init__(
         self,
@@ -108,6 +111,7 @@ class Camera:
         parallel: bool = False,
         near: float = 0.0,
         far: float = math.inf,
+        shift: Any = (0.0, 0.0),
     ) -> None:
         eye_v, look_v, up_v = _vector(eye, "eye"), _vector(look_at, "look_at"), _vector(view_up, "view_up")
         d = _positive(d, "d")
@@ -133,7 +137,10 @@ class Camera:
             raise ValueError("eye and look_at coincide: the view direction is undefined")
         if not np.isfinite(forward).all():
             raise ValueError("eye and look_at are too far apart: their difference overflows float64")
-        values = (eye_v, look_v, up_v, d, w, h, nx, ny, bool(parallel), near, far)
+        shift_v = np.array(shift, dtype=np.float64).reshape(-1)
+        if shift_v.shape != (2,) or not np.isfinite(shift_v).all():
+            raise ValueError(f"shift must be two finite numbers, got {shift!r}")
+        values = (eye_v, look_v, up_v, d, w, h, nx, ny, bool(parallel), near, far, shift_v)
         for name, value in zip(self._FIELDS, values):
             if isinstance(value, np.ndarray):
                 value.flags.writeable = False
@@ -208,8 +215,8 @@ class Camera:
         """Centre of pixel ``(i, j)`` in camera coordinates, ``j`` counted from the top (the seed)."""
         return np.array(
             [
-                -self.w * 0.5 + self.w / self.nx * (i + 0.5),
-                self.h * 0.5 - self.h / self.ny * (j + 0.5),
+                (self.shift[0] - self.w * 0.5) + self.w / self.nx * (i + 0.5),
+                (self.shift[1] + self.h * 0.5) - self.h / self.ny * (j + 0.5),
                 -self.d,
             ]
         )
@@ -221,8 +228,8 @@ class Camera:
         or ``t`` (parallel)."""
         i = np.tile(np.arange(self.nx), self.ny)
         j = self.ny - 1 - np.repeat(np.arange(self.ny), self.nx)
-        x = -self.w * 0.5 + self.w / self.nx * (i + 0.5)
-        y = self.h * 0.5 - self.h / self.ny * (j + 0.5)
+        x = (self.shift[0] - self.w * 0.5) + self.w / self.nx * (i + 0.5)
+        y = (self.shift[1] + self.h * 0.5) - self.h / self.ny * (j + 0.5)
         if self.parallel:
             origins = self.eye + x[:, None] * self.right + y[:, None] * self.up
             return origins, np.broadcast_to(-self.backward, origins.shape), self.near, self.far
@@ -332,6 +339,84 @@ class Camera:
         distance = float(np.max(z + scale * np.maximum(np.abs(x) / tan_x, np.abs(y) / tan_y)))
         distance = max(distance, float(np.abs(z).max()) * 1.01, 1e-300)
         return cls(centre + distance * direction, centre, up, d=distance, view_angle=view_angle, nx=nx, ny=ny)
+
+    @classmethod
+    def from_intrinsics(
+        cls,
+        intrinsic: Any,
+        extrinsic: Any,
+        width: int,
+        height: int,
+        *,
+        near: float = 0.0,
+        far: float = math.inf,
+        pixel_origin: str = "corner",
+    ) -> Camera:
+        """The camera of an intrinsic matrix ``K`` (3x3: fx, fy, cx, cy; no skew) and a 4x4
+        ``extrinsic`` mapping world to camera coordinates (x right, y down, z forward), for
+        an image ``width`` x ``height`` pixels: the convention of COLMAP, OpenCV and Open3D.
+
+        ``pixel_origin="corner"`` puts the top-left pixel's centre at (0.5, 0.5) (COLMAP,
+        Open3D's ``create_rays_pinhole``), ``"center"`` at (0, 0) (OpenCV). An off-centre
+        principal point and non-square pixels are kept. The image plane is at z = 1, so
+        Depth is the camera z of the hit. Casts come out in VTK image order like every cast
+        (row 0 at the bottom: ``image["Depth"].reshape(height, width)[::-1]`` is row-major
+        from the top).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from vtkraycast import Camera
+        >>> K = [[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]]
+        >>> cam = Camera.from_intrinsics(K, np.eye(4), 640, 480)
+        >>> cam.eye.tolist(), (-cam.backward).tolist()  # at the origin, looking down +z
+        ([0.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+        >>> np.allclose(cam.to_intrinsics()[0], K)
+        True
+        """
+        k = np.asarray(intrinsic, dtype=np.float64)
+        e = np.asarray(extrinsic, dtype=np.float64)
+        if k.shape != (3, 3) or e.shape != (4, 4) or not (np.isfinite(k).all() and np.isfinite(e).all()):
+            raise ValueError("need a finite 3x3 intrinsic matrix and a finite 4x4 extrinsic matrix")
+        fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
+        if k[0, 1] != 0 or k[1, 0] != 0 or k[2, 0] != 0 or k[2, 1] != 0 or k[2, 2] != 1 or not (fx > 0 and fy > 0):
+            raise ValueError("the intrinsic matrix must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+        rotation, translation = e[:3, :3], e[:3, 3]
+        if not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-9) or np.linalg.det(rotation) < 0:
+            raise ValueError("the extrinsic matrix's 3x3 block must be a rotation")
+        if pixel_origin not in ("corner", "center"):
+            raise ValueError(f"pixel_origin must be 'corner' (COLMAP, Open3D) or 'center' (OpenCV): {pixel_origin!r}")
+        if pixel_origin == "center":  # the same centres, counted from the corner
+            cx, cy = cx + 0.5, cy + 0.5
+        nx, ny = _pixels(width, "width"), _pixels(height, "height")
+        eye = -rotation.T @ translation
+        return cls(
+            eye,
+            eye + rotation[2],
+            -rotation[1],
+            d=1.0,
+            w=nx / fx,
+            h=ny / fy,
+            nx=nx,
+            ny=ny,
+            near=near,
+            far=far,
+            shift=((nx / 2 - cx) / fx, (cy - ny / 2) / fy),
+        )
+
+    def to_intrinsics(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(K, extrinsic)`` of this pinhole camera, as :meth:`from_intrinsics` takes them
+        (``pixel_origin="corner"``)."""
+        if self.parallel:
+            raise ValueError("a parallel camera has no intrinsic matrix")
+        fx, fy = self.d * self.nx / self.w, self.d * self.ny / self.h
+        cx = self.nx / 2 - self.shift[0] * fx / self.d
+        cy = self.ny / 2 + self.shift[1] * fy / self.d
+        rotation = np.vstack((self.right, -self.up, -self.backward))
+        extrinsic = np.eye(4)
+        extrinsic[:3, :3] = rotation
+        extrinsic[:3, 3] = -rotation @ self.eye
+        return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]), extrinsic
 
     def to_vtk(self) -> Any:
         """An equivalent ``vtkCamera`` (position, focal point, view up, angle or scale, clipping range).

@@ -23,7 +23,7 @@ def image_geometry(camera: Camera | None, world_space: bool) -> tuple[np.ndarray
     if not world_space:
         return np.zeros(3), np.ones(3), np.eye(3)
     sx, sy = camera.w / camera.nx, camera.h / camera.ny
-    x0, y0 = -camera.w / 2 + sx / 2, -camera.h / 2 + sy / 2
+    x0, y0 = camera.shift[0] - camera.w / 2 + sx / 2, camera.shift[1] - camera.h / 2 + sy / 2
     origin = camera.eye + x0 * camera.right + y0 * camera.up - camera.d * camera.backward
     direction = np.column_stack((camera.right, camera.up, camera.backward))
     return origin, np.array([sx, sy, 1.0]), direction

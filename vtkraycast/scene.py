@@ -432,6 +432,7 @@ class Scene:
         if not camera.parallel:
             window += direction_shifts(np.array([[camera.d, camera.w, camera.h]]), bounded=True)
         request.d, request.width, request.height = (math.ldexp(x, window) for x in (camera.d, camera.w, camera.h))
+        request.shift_x, request.shift_y = (math.ldexp(float(x), window) for x in camera.shift)
         request.near, request.far = _shifted(camera.near, shift), _shifted(camera.far, shift)
         request.nx, request.ny, request.parallel = camera.nx, camera.ny, camera.parallel
         buffers = allocate(found, names, n, real)

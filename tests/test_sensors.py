@@ -1,0 +1,106 @@
+"""Cameras users bring: intrinsics and extrinsics (COLMAP, OpenCV, Open3D), checked ray for
+ray against Open3D's create_rays_pinhole and by casting against Open3D's cast_rays."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import vtkraycast as vrc
+from vtkraycast.testing import bumpy_sphere
+
+o3d = pytest.importorskip("open3d")
+
+
+def _look(eye, target, up) -> np.ndarray:
+    """World-to-camera extrinsic (x right, y down, z forward)."""
+    forward = np.asarray(target, float) - eye
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    rotation = np.vstack((right, down, forward))
+    extrinsic = np.eye(4)
+    extrinsic[:3, :3] = rotation
+    extrinsic[:3, 3] = -rotation @ eye
+    return extrinsic
+
+
+K = np.array([[610.0, 0.0, 301.3], [0.0, 580.0, 255.9], [0.0, 0.0, 1.0]])  # off-centre, non-square
+EXTRINSIC = _look(np.array([0.4, -2.7, 1.1]), [0.05, 0.0, -0.1], [0.0, 0.0, 1.0])
+WIDTH, HEIGHT = 640, 480
+
+
+def _open3d_rays() -> np.ndarray:
+    rays = o3d.t.geometry.RaycastingScene.create_rays_pinhole(
+        o3d.core.Tensor(K), o3d.core.Tensor(EXTRINSIC), WIDTH, HEIGHT
+    )
+    return rays.numpy().reshape(HEIGHT, WIDTH, 6)  # row-major from the top
+
+
+def test_rays_equal_open3d_create_rays_pinhole():
+    cam = vrc.Camera.from_intrinsics(K, EXTRINSIC, WIDTH, HEIGHT)
+    origins, directions, _, _ = cam.rays()
+    theirs = _open3d_rays()[::-1].reshape(-1, 6)  # VTK order: row 0 at the bottom
+    np.testing.assert_allclose(origins, theirs[:, :3], atol=1e-6)
+    # Open3D's directions reach the plane z = 1 in camera space, as ours do (float32 there)
+    np.testing.assert_allclose(directions, theirs[:, 3:], rtol=1e-5, atol=1e-6)
+
+
+def test_pixel_origin_center_is_opencv():
+    corner = vrc.Camera.from_intrinsics(K, EXTRINSIC, WIDTH, HEIGHT)
+    center = vrc.Camera.from_intrinsics(K - np.array([[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]]), EXTRINSIC, WIDTH, HEIGHT,
+                                        pixel_origin="center")  # fmt: skip
+    np.testing.assert_allclose(center.rays()[1], corner.rays()[1], atol=1e-12)
+
+
+def test_round_trip_and_depth_is_camera_z():
+    cam = vrc.Camera.from_intrinsics(K, EXTRINSIC, WIDTH, HEIGHT)
+    k, extrinsic = cam.to_intrinsics()
+    np.testing.assert_allclose(k, K, rtol=1e-12)
+    np.testing.assert_allclose(extrinsic, EXTRINSIC, atol=1e-12)
+    mesh = bumpy_sphere(4)
+    image = vrc.cast(mesh, cam, arrays=["Depth", "TriangleId", "Position"])
+    hit = image["TriangleId"] >= 0
+    assert 0.1 < hit.mean() < 0.9
+    camera_points = image["Position"][hit] @ EXTRINSIC[:3, :3].T + EXTRINSIC[:3, 3]
+    np.testing.assert_allclose(image["Depth"][hit], camera_points[:, 2], rtol=1e-12)
+
+
+def test_cast_agrees_with_open3d_cast_rays():
+    mesh = bumpy_sphere(4)
+    cam = vrc.Camera.from_intrinsics(K, EXTRINSIC, WIDTH, HEIGHT)
+    image = vrc.Scene(mesh).cast(cam, arrays=["TriangleId", "Depth"])
+    scene = o3d.t.geometry.RaycastingScene()
+    prepared = vrc.Scene(mesh).prepared
+    scene.add_triangles(o3d.core.Tensor(prepared.points.astype(np.float32)),
+                        o3d.core.Tensor(prepared.triangles.astype(np.uint32)))  # fmt: skip
+    result = scene.cast_rays(o3d.core.Tensor(_open3d_rays().astype(np.float32)))
+    ids = result["primitive_ids"].numpy().astype(np.int64)[::-1].reshape(-1)
+    ids[ids == np.iinfo(np.uint32).max] = -1
+    assert (ids == image["TriangleId"]).mean() > 0.999
+    depth = result["t_hit"].numpy()[::-1].reshape(-1)
+    both = np.isfinite(depth) & np.isfinite(image["Depth"])
+    np.testing.assert_allclose(image["Depth"][both], depth[both], rtol=1e-4)
+
+
+def test_shifted_window_keeps_the_fast_path_exact():
+    # the tile path (camera tree, sure hits) against per-pixel rays through intersect
+    cam = vrc.Camera.from_intrinsics(K, EXTRINSIC, 200, 150)
+    scene = vrc.Scene(bumpy_sphere(4))
+    image = scene.cast(cam, arrays=["TriangleId", "Depth"])
+    origins, directions, tmin, tmax = cam.rays()
+    hits = scene.intersect(origins, directions, tmin=tmin, tmax=tmax, arrays=["triangle_id", "t"])
+    np.testing.assert_array_equal(image["TriangleId"], hits["triangle_id"])
+    np.testing.assert_array_equal(image["Depth"], hits["t"] * cam.d)
+
+
+def test_bad_intrinsics_raise():
+    with pytest.raises(ValueError, match="intrinsic matrix must be"):
+        vrc.Camera.from_intrinsics([[500, 1, 320], [0, 500, 240], [0, 0, 1]], np.eye(4), 640, 480)
+    with pytest.raises(ValueError, match="must be a rotation"):
+        vrc.Camera.from_intrinsics(K, np.diag([2.0, 1, 1, 1]), 640, 480)
+    with pytest.raises(ValueError, match="pixel_origin"):
+        vrc.Camera.from_intrinsics(K, np.eye(4), 640, 480, pixel_origin="middle")
+    with pytest.raises(ValueError, match="no intrinsic matrix"):
+        vrc.Camera((0, 0, 1), (0, 0, 0), (0, 1, 0), parallel=True).to_intrinsics()
