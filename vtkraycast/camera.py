@@ -369,8 +369,8 @@ class Camera:
         >>> from vtkraycast import Camera
         >>> K = [[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]]
         >>> cam = Camera.from_intrinsics(K, np.eye(4), 640, 480)
-        >>> cam.eye.tolist(), (-cam.backward).tolist()  # at the origin, looking down +z
-        ([0.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+        >>> cam.eye.tolist(), cam.backward.tolist()  # at the origin, looking down +z
+        ([0.0, 0.0, 0.0], [0.0, 0.0, -1.0])
         >>> np.allclose(cam.to_intrinsics()[0], K)
         True
         """
