@@ -104,3 +104,80 @@ def test_bad_intrinsics_raise():
         vrc.Camera.from_intrinsics(K, np.eye(4), 640, 480, pixel_origin="middle")
     with pytest.raises(ValueError, match="no intrinsic matrix"):
         vrc.Camera((0, 0, 1), (0, 0, 0), (0, 1, 0), parallel=True).to_intrinsics()
+
+
+# -- panoramas and lidar, against the analytic distances to a box's walls ---------------
+
+BOX = (-1.0, 3.0, -2.0, 1.5, -0.5, 2.5)
+
+
+def _box() -> vrc.Scene:
+    import pyvista as pv
+
+    return vrc.Scene(pv.Box(bounds=BOX, level=2).triangulate())
+
+
+def _wall_distance(point: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Distance from ``point`` (inside the box) along unit ``directions`` to its walls."""
+    low, high = np.array(BOX[0::2]), np.array(BOX[1::2])
+    with np.errstate(divide="ignore"):
+        to_wall = np.where(directions > 0, (high - point) / directions, (low - point) / directions)
+    return np.min(np.where(directions != 0, to_wall, np.inf), axis=1)
+
+
+def test_lidar_returns_the_walls_of_a_box():
+    position = np.array([0.3, -0.4, 0.7])
+    lidar = vrc.Lidar(position, elevations=[-30, -7.5, 0, 12, 45], azimuth_steps=360, forward=(1, 1, 0))
+    cloud, ranges = _box().scan(lidar, range_image=True)
+    assert cloud.n_points == 5 * 360 and ranges.shape == (5, 360)
+    _, directions, ring, azimuth = lidar.rays()
+    np.testing.assert_allclose(ranges.reshape(-1), _wall_distance(position, directions), rtol=1e-12)
+    np.testing.assert_allclose(cloud.points, position + ranges.reshape(-1, 1) * directions, atol=1e-12)
+    np.testing.assert_array_equal(cloud["Ring"], ring)
+    np.testing.assert_array_equal(cloud["Elevation"], np.array([-30, -7.5, 0, 12, 45])[ring])
+    np.testing.assert_allclose(cloud["Azimuth"], azimuth)
+    assert {"TriangleId", "CellId", "Barycentric", "Range"} <= set(cloud.point_data.keys())
+    # beam 0 of ring "0 degrees" looks along forward, beam 90 (90 degrees) to its left
+    horizontal = directions[2 * 360 : 3 * 360]
+    np.testing.assert_allclose(horizontal[0], np.array([1, 1, 0]) / np.sqrt(2), atol=1e-15)
+    np.testing.assert_allclose(horizontal[90], np.array([-1, 1, 0]) / np.sqrt(2), atol=1e-15)
+
+
+def test_lidar_range_limits():
+    position = np.array([0.3, -0.4, 0.7])
+    lidar = vrc.Lidar(position, [0.0], 720, min_range=1.0, max_range=2.0)
+    cloud, ranges = _box().scan(lidar, range_image=True)
+    expected = _wall_distance(position, lidar.rays()[1])
+    inside = (expected >= 1.0) & (expected <= 2.0)
+    assert 0 < inside.sum() < len(inside)
+    np.testing.assert_array_equal(np.isfinite(ranges.reshape(-1)), inside)
+    assert cloud.n_points == inside.sum()
+    with pytest.raises(ValueError, match="elevations"):
+        vrc.Lidar(position, [100.0], 10)
+    with pytest.raises(ValueError, match="azimuth_steps"):
+        vrc.Lidar(position, [0.0], 0)
+
+
+def test_panorama_depth_is_the_distance_to_the_walls():
+    eye = np.array([1.2, 0.1, 0.4])
+    panorama = vrc.Panorama(eye, 96, 48, forward=(0, 1, 0))
+    image = _box().cast(panorama)
+    assert image.dimensions == (96, 48, 1)
+    _, directions = panorama.rays()
+    np.testing.assert_allclose(image["Depth"], _wall_distance(eye, directions), rtol=1e-12)
+    assert (image["TriangleId"] >= 0).all()
+    # the centre of the middle row looks forward; row 0 is the bottom
+    centre = directions.reshape(48, 96, 3)
+    np.testing.assert_allclose(centre[23:25, 47:49].mean(axis=(0, 1)), [0, 1, 0], atol=0.05)
+    assert centre[0, 0, 2] < -0.99 and centre[-1, 0, 2] > 0.99
+
+
+def test_cast_many_equals_separate_casts():
+    scene = vrc.Scene(bumpy_sphere(3))
+    views = [vrc.Camera.from_intrinsics(K, _look(np.array(eye), [0, 0, 0], [0, 0, 1]), 80, 60)
+             for eye in ([0.4, -2.7, 1.1], [2.5, 0.3, -0.8], [-1.9, 1.9, 0.6])]  # fmt: skip
+    many = scene.cast_many(views, arrays=["TriangleId", "Depth"])
+    for camera, image in zip(views, many):
+        single = scene.cast(camera, arrays=["TriangleId", "Depth"])
+        np.testing.assert_array_equal(image["TriangleId"], single["TriangleId"])
+        np.testing.assert_array_equal(image["Depth"], single["Depth"])

@@ -14,10 +14,11 @@ from vtkmodules.vtkCommonDataModel import vtkImageData
 from . import _core
 from .camera import Camera
 from .fields import GEOMETRY_ARRAYS, allocate, mesh_arrays, output_bytes, request_outputs, row_layout, select_arrays
-from .image import fill_image
+from .image import fill_image, set_arrays
 from .magnitudes import direction_shifts, scene_scale, shift_lengths
 from .mesh import prepare_mesh
 from .parallel import NO_HIT, communicator, composite, default_threads, triangle_keys
+from .sensors import Lidar, Panorama
 from .visibility import CROSSING_ARRAYS, crossing_arrays, layered_arrays, visible_points
 
 __all__ = ["PRECISIONS", "STRATEGIES", "Scene"]
@@ -252,6 +253,8 @@ class Scene:
         """
         import pyvista as pv
 
+        if isinstance(camera, Panorama):
+            return self._cast_panorama(camera, options)
         camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
         arrays = options.get("arrays")
         wanted = [arrays] if isinstance(arrays, str) else list(arrays or [])
@@ -294,6 +297,81 @@ class Scene:
         image = fill_image(pv.ImageData(), camera, values, world_space=options.get("world_space", False))
         image.SetDimensions(camera.nx, camera.ny, layers)
         return image
+
+    def cast_many(self, cameras: Iterable[Camera | Any], *, progress_bar: bool = False, **options: Any) -> list[Any]:
+        """:meth:`cast` of each camera (options as there), one BVH for all: a list of images,
+        with one progress bar over the cameras when ``progress_bar``.
+
+        Examples
+        --------
+        >>> import pyvista as pv
+        >>> import vtkraycast as vrc
+        >>> views = [vrc.Camera((0, 0, 3), (0, 0, 0), (0, 1, 0), nx=32, ny=24).replace(eye=e)
+        ...          for e in [(0, 0, 3), (3, 0, 0), (0, 3, 0.1)]]
+        >>> [image.dimensions for image in vrc.Scene(pv.Sphere()).cast_many(views)]
+        [(32, 24, 1), (32, 24, 1), (32, 24, 1)]
+        """
+        cameras = list(cameras)
+        if not progress_bar:
+            return [self.cast(camera, **options) for camera in cameras]
+        try:
+            from tqdm import tqdm
+        except ImportError:
+            raise ImportError("progress_bar=True needs tqdm: pip install tqdm") from None
+        return [self.cast(camera, **options) for camera in tqdm(cameras, desc="Ray casting", unit="image")]
+
+    def _cast_panorama(self, panorama: Panorama, options: dict) -> Any:
+        import pyvista as pv
+
+        found = mesh_arrays(self._mesh)
+        names = select_arrays(found, options.pop("arrays", None), options.pop("interpolate", True))
+        origins, directions = panorama.rays()
+        culling = options.pop("backface_culling", False)
+        unknown = set(options) - {"strategy", "precision", "accel", "threads"}
+        if unknown:
+            raise ValueError(f"{', '.join(sorted(unknown))} not supported for a panorama")
+        buffers, _ = self._cast_rays(origins, directions, names, panorama.near, panorama.far, culling, options)
+        image = pv.ImageData(dimensions=(panorama.nx, panorama.ny, 1))
+        return set_arrays(image, buffers)
+
+    def scan(
+        self,
+        lidar: Lidar,
+        *,
+        arrays: Iterable[str] | str | None = None,
+        interpolate: bool = True,
+        range_image: bool = False,
+        threads: int | None = None,
+    ) -> Any:
+        """The returns of a spinning lidar: a ``pyvista.PolyData`` of the hit points (world
+        coordinates) with point arrays ``Range`` (distance from the lidar), ``Elevation``
+        and ``Azimuth`` (degrees), ``Ring``, ``TriangleId``, ``CellId``, ``Barycentric``
+        and the mesh's arrays (``arrays`` and ``interpolate`` as in :meth:`cast`). With
+        ``range_image``, also the ranges as a ``(rings, azimuth_steps)`` array, NaN where a
+        beam returns nothing.
+        """
+        import pyvista as pv
+
+        found = mesh_arrays(self._mesh)
+        names = select_arrays(found, arrays, interpolate)
+        wanted = list(dict.fromkeys([*names, "Depth", "Position"]))
+        origins, directions, ring, azimuth = lidar.rays()
+        buffers, _ = self._cast_rays(
+            origins, directions, wanted, lidar.min_range, lidar.max_range, False, {"threads": threads}
+        )
+        ranges = buffers["Depth"].astype(np.float64)
+        hit = np.isfinite(ranges)
+        cloud = pv.PolyData(np.ascontiguousarray(buffers["Position"][hit]))
+        cloud.point_data["Range"] = ranges[hit]
+        cloud.point_data["Elevation"] = lidar.elevations[ring[hit]]
+        cloud.point_data["Azimuth"] = azimuth[hit]
+        cloud.point_data["Ring"] = ring[hit].astype(np.int32)
+        for name in names:
+            if name not in ("Depth", "Position", "vtkValidPointMask"):
+                cloud.point_data[name] = buffers[name][hit]
+        if range_image:
+            return cloud, ranges.reshape(len(lidar.elevations), lidar.azimuth_steps)
+        return cloud
 
     def visible_cells(self, camera: Camera | Any, *, threads: int | None = None) -> np.ndarray:
         """Ids of the input cells the camera sees (those some pixel ray hits first), sorted.
@@ -503,19 +581,45 @@ class Scene:
         ([1.0, 1.0], [0.5, 0.0, 0.0])
         """
         names = _ray_arrays(arrays, self._mesh.composite_ids is not None)
-        real = _precision(precision)
+        options = dict(strategy=strategy, precision=precision, accel=accel, threads=threads)
+        buffers, shape = self._cast_rays(
+            origins, directions, [RAY_ARRAYS[name] for name in names], tmin, tmax, backface_culling, options
+        )
+        return {name: _batched(buffers[RAY_ARRAYS[name]], shape) for name in names}
+
+    def _cast_rays(
+        self,
+        origins: Any,
+        directions: Any,
+        names: list[str],
+        tmin: float,
+        tmax: float,
+        backface_culling: bool,
+        options: dict,
+    ) -> tuple[dict[str, np.ndarray], tuple[int, ...]]:
+        """The output arrays ``names`` (image names: Depth is t) of arbitrary rays, one row
+        per ray, and the batch shape."""
+        precision = options.get("precision", "float64")
         request, shape, (k, j) = self._ray_request(
-            origins, directions, tmin, tmax, strategy, precision, accel, threads, backface_culling
+            origins,
+            directions,
+            tmin,
+            tmax,
+            options.get("strategy", "auto"),
+            precision,
+            options.get("accel", "bvh"),
+            options.get("threads"),
+            backface_culling,
         )
         found = mesh_arrays(self._mesh)
-        buffers = allocate(found, [RAY_ARRAYS[name] for name in names], request.origins.shape[0], real)
+        buffers = allocate(found, names, request.origins.shape[0], _precision(precision))
         request_outputs(request, self._mesh, found, buffers)
         _core.cast(self._core, request)
-        if "t" in names:
+        if "Depth" in names:
             shift_lengths(buffers["Depth"], k - j, "t")
-        if "position" in names:
+        if "Position" in names:
             shift_lengths(buffers["Position"], k, "position", distance=False)
-        return {name: _batched(buffers[RAY_ARRAYS[name]], shape) for name in names}
+        return buffers, shape
 
     def occluded(
         self,

@@ -1,0 +1,135 @@
+"""Sensors beyond the pinhole: a 360-degree equirectangular panorama and a spinning lidar.
+Both are sets of rays from one point, cast through Scene's arbitrary-ray path (exact, as
+:meth:`Scene.intersect`); their directions have unit length, so t is the distance."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Lidar", "Panorama"]
+
+
+def _frame(forward: Any, up: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit forward, left and up axes (up made orthogonal to forward)."""
+    f = np.asarray(forward, dtype=np.float64).reshape(3)
+    u = np.asarray(up, dtype=np.float64).reshape(3)
+    if not (np.isfinite(f).all() and np.isfinite(u).all()) or not np.linalg.norm(f) > 0:
+        raise ValueError("forward must be a finite non-zero vector, up a finite vector")
+    f = f / np.linalg.norm(f)
+    left = np.cross(u, f)
+    if not np.linalg.norm(left) > 1e-12:
+        raise ValueError("up is parallel to forward (or zero): the sensor's orientation is undefined")
+    left /= np.linalg.norm(left)
+    return f, left, np.cross(f, left)
+
+
+def _directions(f, left, up, azimuth: np.ndarray, elevation: np.ndarray) -> np.ndarray:
+    """Unit directions at ``azimuth`` (radians, counter-clockwise from forward seen from
+    above, towards left) and ``elevation`` (radians above the horizontal plane)."""
+    c = np.cos(elevation)[:, None]
+    return c * (np.cos(azimuth)[:, None] * f + np.sin(azimuth)[:, None] * left) + np.sin(elevation)[:, None] * up
+
+
+def _point(value: Any, name: str) -> np.ndarray:
+    p = np.asarray(value, dtype=np.float64).reshape(-1)
+    if p.shape != (3,) or not np.isfinite(p).all():
+        raise ValueError(f"{name} must be three finite numbers, got {value!r}")
+    return p
+
+
+@dataclass(frozen=True)
+class Panorama:
+    """An equirectangular 360 x 180 degree camera at ``eye``: pixel column ``i`` looks at
+    azimuth ``360 (i + 0.5) / nx - 180`` degrees (0 straight ``forward``, positive to the
+    left), row ``r`` (0 at the bottom, VTK image order) at elevation ``180 (r + 0.5) / ny -
+    90``. :meth:`Scene.cast` takes it; Depth is the distance from the eye along the ray.
+
+    Examples
+    --------
+    >>> import pyvista as pv
+    >>> import vtkraycast as vrc
+    >>> image = vrc.Scene(pv.Sphere(radius=2.0)).cast(vrc.Panorama((0, 0, 0), 64, 32))
+    >>> image.dimensions, bool(abs(float(image["Depth"].max()) - 2.0) < 0.01)
+    ((64, 32, 1), True)
+    """
+
+    eye: Any
+    nx: int
+    ny: int
+    forward: Any = (1.0, 0.0, 0.0)
+    up: Any = (0.0, 0.0, 1.0)
+    near: float = 0.0
+    far: float = math.inf
+    _axes: tuple = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "eye", _point(self.eye, "eye"))
+        for name in ("nx", "ny"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+        if not 0 <= self.near < self.far:
+            raise ValueError(f"need 0 <= near < far, got near={self.near}, far={self.far}")
+        object.__setattr__(self, "_axes", _frame(self.forward, self.up))
+
+    def rays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Origins and unit directions ``(nx * ny, 3)``, pixel ``(i, r)`` at ``i + r * nx``."""
+        i = np.tile(np.arange(self.nx), self.ny)
+        r = np.repeat(np.arange(self.ny), self.nx)
+        azimuth = 2 * np.pi * (i + 0.5) / self.nx - np.pi
+        elevation = np.pi * (r + 0.5) / self.ny - np.pi / 2
+        directions = _directions(*self._axes, azimuth, elevation)
+        return np.broadcast_to(self.eye, directions.shape), directions
+
+
+@dataclass(frozen=True)
+class Lidar:
+    """A spinning lidar at ``position``: one ring per angle of ``elevations`` (degrees above
+    the plane normal to ``up``), each with ``azimuth_steps`` beams evenly over 360 degrees
+    from ``forward`` (towards the left: counter-clockwise seen from above). Returns closer
+    than ``min_range`` or farther than ``max_range`` are not reported. :meth:`Scene.scan`
+    casts it.
+
+    Examples
+    --------
+    >>> import pyvista as pv
+    >>> import vtkraycast as vrc
+    >>> lidar = vrc.Lidar((0, 0, 0), elevations=[-10, 0, 10], azimuth_steps=90)
+    >>> cloud = vrc.Scene(pv.Sphere(radius=3.0, theta_resolution=60, phi_resolution=60)).scan(lidar)
+    >>> cloud.n_points, bool(abs(float(cloud["Range"].mean()) - 3.0) < 0.01)
+    (270, True)
+    """
+
+    position: Any
+    elevations: Any
+    azimuth_steps: int
+    forward: Any = (1.0, 0.0, 0.0)
+    up: Any = (0.0, 0.0, 1.0)
+    min_range: float = 0.0
+    max_range: float = math.inf
+    _axes: tuple = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position", _point(self.position, "position"))
+        elevations = np.asarray(self.elevations, dtype=np.float64).reshape(-1)
+        if elevations.size == 0 or not np.isfinite(elevations).all() or (np.abs(elevations) > 90).any():
+            raise ValueError("elevations must be one or more angles in degrees within [-90, 90]")
+        object.__setattr__(self, "elevations", elevations)
+        steps = self.azimuth_steps
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+            raise ValueError(f"azimuth_steps must be an integer >= 1, got {steps!r}")
+        if not 0 <= self.min_range < self.max_range:
+            raise ValueError(f"need 0 <= min_range < max_range, got {self.min_range}, {self.max_range}")
+        object.__setattr__(self, "_axes", _frame(self.forward, self.up))
+
+    def rays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Origins, unit directions ``(rings * steps, 3)`` (beam ``a`` of ring ``e`` at
+        ``a + e * steps``), and each beam's ring and azimuth (degrees)."""
+        ring = np.repeat(np.arange(len(self.elevations)), self.azimuth_steps)
+        azimuth = np.tile(np.arange(self.azimuth_steps) * (360.0 / self.azimuth_steps), len(self.elevations))
+        directions = _directions(*self._axes, np.radians(azimuth), np.radians(self.elevations[ring]))
+        return np.broadcast_to(self.position, directions.shape), directions, ring, azimuth
