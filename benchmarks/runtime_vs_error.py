@@ -124,7 +124,7 @@ def source_line() -> str:
 
     head = git("log", "-1", "--format=%h (%ad) %s", "--date=iso") or "unknown"
     dirty = git("status", "--porcelain", "--", "src", "vtkraycast", "CMakeLists.txt", "pyproject.toml")
-    built = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(os.path.getmtime(_core.__file__)))
+    built = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(os.path.getmtime(_core._module.__file__)))
     return (
         f"source: commit {head}{'; package sources modified since' if dirty else ''}; "
         f"installed native core built {built}"

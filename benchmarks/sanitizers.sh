@@ -23,7 +23,7 @@ echo "== workdir $WORK"
 "$PY" -m pip install -q "numpy>=1.24" "vtk>=9.2" "pyvista>=0.48" "tqdm>=4" \
     "pytest>=7" "libigl>=2.6" "hypothesis>=6" "matplotlib>=3.6" "scikit-build-core>=0.10" "nanobind>=2.4"
 
-# 2. Build the core instrumented. The project's -march=native -fno-fast-math -ffp-contract=off
+# 2. Build the core instrumented. The project's -march and -fno-fast-math -ffp-contract=off
 #    are added by CMakeLists.txt on top of these. Build type Debug with its flags set to -O1 -g:
 #    nanobind_add_module appends -Os in Release/RelWithDebInfo, which would override -O1; Debug
 #    gets no -Os and no -DNDEBUG (asserts stay live). nanobind (NB_STATIC) gets the same flags.
@@ -58,7 +58,7 @@ export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 
 # The instrumented module must be the one imported (not /work/venv's, not the checkout).
 cd "$WORK"
-CORE=$("$PY" -c "import vtkraycast._core as c; print(c.__file__)")
+CORE=$("$PY" -c "import vtkraycast._core as c; print(c._module.__file__)")
 echo "== imported core: $CORE"
 [[ "$CORE" == "$WORK/venv/"* ]] || { echo "not the sanitizer build"; exit 1; }
 SYMS=$(nm -D "$CORE")

@@ -288,7 +288,9 @@ bool cast(const vrc::Scene& scene, const Request& q) {
 
 }  // namespace
 
-NB_MODULE(_core, m) {
+// One source, a module per instruction set (CMakeLists.txt): VRC_MODULE names it.
+#define VRC_NB_MODULE(name, variable) NB_MODULE(name, variable)
+VRC_NB_MODULE(VRC_MODULE, m) {
     // pvbatch under MPI ends its interpreter without releasing every Python object that
     // holds a core function (VTK's observers, ParaView's proxies), and nanobind then reports
     // them as leaks at exit: nothing a user can act on, the process is ending.
@@ -434,6 +436,10 @@ NB_MODULE(_core, m) {
         "origins"_a, "directions"_a, "threads"_a,
         "(finite, nonzero directions, least and greatest origin component, least and greatest of the directions' "
         "largest |component|) in one parallel pass.");
+    m.def(
+        "cpu_supports_avx2",
+        [] { return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"); },
+        "Whether this CPU runs the AVX2 build of the core (AVX2 and FMA).");
     m.def("cast", &cast, "scene"_a, "request"_a,
           "Casts a request's rays (released GIL, all outputs written by the workers). Returns False if aborted.");
 }

@@ -1,0 +1,69 @@
+"""The portable builds of the core (CMakeLists.txt, vtkraycast/_core.py): baseline x86-64
+and AVX2 give the same arrays bit for bit, each forced in turn, and the package runs on
+older CPUs: under qemu-user (Debian's qemu-user, as .ci/run installs it) as a Westmere
+(no AVX) it picks the baseline build, as a Haswell the AVX2 one, with the same results."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vtkraycast import _core
+
+PROBE = Path(__file__).resolve().parent / "builds" / "probe.py"
+QEMU = shutil.which("qemu-x86_64")
+
+
+def _probe(tmp_path: Path, tag: str, *, core: str | None = None, cpu: str | None = None) -> dict[str, np.ndarray]:
+    out = tmp_path / f"{tag}.npz"
+    env = dict(os.environ)
+    env.pop("VTKRAYCAST_CORE", None)
+    if core:
+        env["VTKRAYCAST_CORE"] = core
+    command = [sys.executable, str(PROBE), str(out)]
+    if cpu:
+        command = [QEMU, "-cpu", cpu, *command]
+    done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=600, check=False)
+    assert done.returncode == 0, f"{' '.join(command)}:\n{done.stdout}\n{done.stderr}"
+    return dict(np.load(out))
+
+
+def _assert_same(got: dict, expected: dict, what: str) -> None:
+    assert set(got) == set(expected), what
+    for name in expected:
+        if name != "core":
+            np.testing.assert_array_equal(got[name], expected[name], err_msg=f"{what}: {name}")
+
+
+def _builds() -> list[str]:
+    here = Path(_core.__file__).parent
+    return sorted(p.name.split(".")[0].removeprefix("_core_") for p in here.glob("_core_*.so"))
+
+
+def test_every_build_gives_the_same_arrays(tmp_path):
+    builds = _builds()
+    if builds == ["native"]:
+        pytest.skip("built with VTKRAYCAST_NATIVE=ON: one core only")
+    assert builds == ["avx2", "baseline"]
+    default = _probe(tmp_path, "default")
+    assert str(default["core"]) == ("avx2" if _core.cpu_supports_avx2() else "baseline")
+    for build in ("baseline", "avx2") if _core.cpu_supports_avx2() else ("baseline",):
+        forced = _probe(tmp_path, build, core=build)
+        assert str(forced["core"]) == build
+        _assert_same(forced, default, build)
+
+
+@pytest.mark.skipif(QEMU is None, reason="qemu-user is not installed (apt-get install qemu-user; .ci/run does)")
+@pytest.mark.parametrize(("cpu", "build"), [("Westmere", "baseline"), ("Haswell", "avx2")])
+def test_runs_on_older_cpus(tmp_path, cpu, build):
+    if _builds() == ["native"]:
+        pytest.skip("built with VTKRAYCAST_NATIVE=ON: for this machine only")
+    emulated = _probe(tmp_path, cpu, cpu=cpu)
+    assert str(emulated["core"]) == build
+    _assert_same(emulated, _probe(tmp_path, "host"), cpu)
