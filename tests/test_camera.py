@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+import pyvista as pv
 from vtkmodules.vtkRenderingCore import vtkCamera
 
 import vtkraycast as vrc
@@ -194,3 +195,20 @@ def test_to_vtk_cameras_render(run_python):
     )
     done = run_python(code)
     assert "rendered" in done.stdout
+
+
+@pytest.mark.parametrize("view", ["iso", "+x", "-z", "xz"])
+def test_framing_points_fits_the_object_tightly(view):
+    rng = np.random.default_rng(2)
+    points = rng.normal(size=(2000, 3)) * [3.0, 1.0, 0.5] + [10.0, -4.0, 2.0]
+    points = np.vstack((points, [[30.0, 20.0, 10.0]]))  # far from the rest: the box's corner is empty
+    cam = vrc.Camera.framing(points, view=view, nx=200, ny=100)
+    offset = points - cam.eye
+    depth = offset @ -cam.backward
+    x = (offset @ cam.right) / depth * cam.d / (cam.w / 2)  # -1 .. 1 across the window
+    y = (offset @ cam.up) / depth * cam.d / (cam.h / 2)
+    assert (depth > 0).all()
+    assert np.abs(x).max() <= 1 / 1.05 + 1e-9 and np.abs(y).max() <= 1 / 1.05 + 1e-9
+    assert max(np.abs(x).max(), np.abs(y).max()) > 0.9  # tight: touches the margin on one side
+    image = vrc.cast(pv.PolyData(points).delaunay_3d().extract_surface(), cam, arrays=["TriangleId"])
+    assert (image["TriangleId"] >= 0).mean() > 0.05

@@ -299,12 +299,14 @@ class Camera:
         view_angle: float = 30.0,
         parallel: bool = False,
     ) -> Camera:
-        """A camera that frames the box ``bounds = (xmin, xmax, ymin, ymax, zmin, zmax)``.
+        """A camera that frames ``bounds``: a box ``(xmin, xmax, ymin, ymax, zmin, zmax)``, or
+        the ``(n, 3)`` points of a mesh (then the object itself, not its box, fills the view:
+        a sparse object's empty box corners leave no margin of empty pixels).
 
         ``view`` names the side the eye looks from: ``"iso"`` (from +x +y +z),
         ``"+x"``, ``"-x"``, ``"+y"``, ``"-y"``, ``"+z"``, ``"-z"``, or pyvista's
-        ``"xy"``, ``"xz"``, ``"yz"`` (from +z, -y and +x). The whole bounding sphere fits
-        in the window with a small margin.
+        ``"xy"``, ``"xz"``, ``"yz"`` (from +z, -y and +x). Everything fits in the window
+        with a 5 % margin, centred in it.
 
         Examples
         --------
@@ -312,9 +314,17 @@ class Camera:
         >>> cam.look_at.tolist(), cam.right.round(6).tolist()
         ([0.0, 0.0, 0.0], [1.0, 0.0, 0.0])
         """
-        b = np.asarray(bounds, dtype=np.float64).reshape(-1)
+        given = np.asarray(bounds, dtype=np.float64)
+        points = None
+        if given.ndim == 2 and given.shape[1] == 3 and len(given) and np.isfinite(given).all():
+            points = given
+            b = np.column_stack((given.min(axis=0), given.max(axis=0))).reshape(-1)
+        else:
+            b = given.reshape(-1)
         if b.shape != (6,) or not np.isfinite(b).all() or (b[1::2] < b[0::2]).any():
-            raise ValueError(f"bounds must be finite (xmin, xmax, ymin, ymax, zmin, zmax), got {b.tolist()}")
+            raise ValueError(
+                f"bounds must be finite (xmin, xmax, ymin, ymax, zmin, zmax) or (n, 3) points, got {given.shape}"
+            )
         try:
             direction, up = _VIEWS[view]
         except KeyError:
@@ -325,10 +335,16 @@ class Camera:
         right = np.cross(up, direction)
         right /= np.linalg.norm(right)
         true_up = np.cross(direction, right)
-        # The box corners in camera axes (relative to the centre), then the nearest eye
-        # distance that keeps every corner inside the window.
-        corners = np.array(np.meshgrid(*b.reshape(3, 2), indexing="ij")).reshape(3, -1).T - centre
+        # The box corners (or the points) in camera axes, relative to the centre of their
+        # extent across the view; then the nearest eye distance that keeps all inside.
+        if points is None:
+            corners = np.array(np.meshgrid(*b.reshape(3, 2), indexing="ij")).reshape(3, -1).T - centre
+        else:
+            corners = points - centre
         x, y, z = corners @ right, corners @ true_up, corners @ direction
+        mid_x, mid_y = (x.max() + x.min()) / 2, (y.max() + y.min()) / 2
+        centre = centre + mid_x * right + mid_y * true_up
+        x, y = x - mid_x, y - mid_y
         tan_y = math.tan(math.radians(view_angle) / 2.0)
         tan_x = tan_y * nx / ny
         scale = 1.05  # a margin around the box

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import sys
 import time
 from collections.abc import Sequence
@@ -63,11 +64,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not isinstance(mesh, pv.DataSet):
         mesh = mesh.combine() if isinstance(mesh, pv.MultiBlock) else mesh
     nx, ny = args.size
-    camera = Camera.framing(mesh.bounds, view=args.view, nx=nx, ny=ny)
+    camera = Camera.framing(np.asarray(mesh.points) if mesh.n_points else mesh.bounds, view=args.view, nx=nx, ny=ny)
     arrays = ["TriangleId", "CellId", "Barycentric", "Depth", "Normal", "vtkValidPointMask"]
     cast_start = time.perf_counter()
     scene = one_shot_scene(mesh, camera, threads=args.threads)
-    camera, buffers = scene.buffers(camera, arrays=arrays, strategy=args.strategy, threads=args.threads)
+    bar = sys.stderr.isatty() and importlib.util.find_spec("tqdm") is not None  # (on long casts)
+    camera, buffers = scene.buffers(
+        camera, arrays=arrays, strategy=args.strategy, threads=args.threads, progress_bar=bar
+    )
     elapsed = time.perf_counter() - cast_start
     pv.wrap(fill_image(vtkImageData(), camera, buffers)).save(args.output)
     facing = buffers["Normal"] @ camera.backward
