@@ -1,6 +1,6 @@
 """The ParaView plugin (filters/vtkraycast_paraview.py) inside real ParaView.
 
-vtkraycast is installed for ParaView's Python the way the README's "ParaView" section
+vtkraycast is installed for ParaView's Python the way docs/paraview.md
 says (``pip install --no-deps --target DIR .``, ``usercustomize.py`` beside it,
 ``PYTHONPATH=DIR``); ``pvbatch`` then runs tests/paraview/raycast_pvbatch.py, which loads
 the plugin with ``LoadPlugin(path, ns=globals())`` and applies ``RayCast`` to a ParaView

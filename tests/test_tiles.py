@@ -129,7 +129,7 @@ def test_grazing_rays(precision):
     """A camera just above a tilted plane, looking along it: its rays dip 0.05 to 0.4
     degrees, so t is ill-conditioned, yet the exact test's t stays within the rounding that
     depth culling allows. (The inexact float32 tests do not: on such rays their packets may
-    end on another triangle than ray by ray, within their own error; see the README.)"""
+    end on another triangle than ray by ray, within their own error; see docs/exactness.md.)"""
     a, b, c = 0.3, -0.2, 0.5
     rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
     ry = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]])

@@ -569,7 +569,7 @@ class Scene:
 
         ``tmin`` must be >= 0 (hits behind an origin are not cast). Rays far beyond what the
         precision's arithmetic holds, or hits whose ``t`` leaves the output type's range,
-        raise a ValueError naming the limit (README, "Supported range").
+        raise a ValueError naming the limit (docs/exactness.md, "Supported range").
 
         Examples
         --------
