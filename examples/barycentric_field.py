@@ -1,4 +1,5 @@
 """The barycentric field of a mesh, shown as colour.
+=================================================
 
 Every pixel whose ray hits the mesh gets the barycentric weights ``(l1, l2, l3)`` of the
 hit point in its triangle as red, green and blue, so each visible triangle shows up as a

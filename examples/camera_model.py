@@ -1,4 +1,5 @@
 """The seed lecture's camera model, drawn in 3D.
+=============================================
 
 The camera of the seed is an eye, a view-up direction and an image window ``w x h`` at
 distance ``d`` in front of the eye, cut into ``nx x ny`` pixels; the ray through pixel

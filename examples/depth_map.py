@@ -1,4 +1,5 @@
 """A depth map from the ray caster next to VTK's own z-buffer of the same camera.
+==============================================================================
 
 The mesh is rendered by VTK (pyvista, off screen, no anti-aliasing) and ray cast through
 the plotter's camera (``vrc.Camera.from_vtk(plotter)`` takes position, focal point, view

@@ -1,4 +1,5 @@
 """A point field interpolated through the barycentric weights, next to VTK's rendering of it.
+==========================================================================================
 
 The nut gets two point fields: ``Linear``, a linear function of the coordinates, and
 ``Wave``, a smooth non-linear one. A cast interpolates every point array of the mesh at

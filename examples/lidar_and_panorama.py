@@ -1,4 +1,5 @@
 """A spinning lidar's scan and a 360-degree panorama of the same scene.
+====================================================================
 
 A generated street of boxes on a ground plane is scanned by a 32-ring lidar
 (``vrc.Lidar`` and ``Scene.scan``) and seen by an equirectangular panorama

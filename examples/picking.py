@@ -1,4 +1,5 @@
 """Picking: the triangles under a rectangle of pixels.
+===================================================
 
 A cast's ``TriangleId`` (and ``CellId``) image answers "what is under this pixel?" for
 every pixel at once, so a rectangular pick is a slice of it: the unique ids in the slice

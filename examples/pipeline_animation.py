@@ -1,4 +1,5 @@
 """The ray caster inside a VTK pipeline, re-cast for every frame of a camera animation.
+====================================================================================
 
 A ``vtkPLYReader`` reads pyvista's shipped ``nut.ply``; ``vrc.RayCastFilter`` casts it
 from a ``vtkCamera``; ``vtkArrayCalculator`` copies ``Depth`` into the active scalars
