@@ -16,7 +16,11 @@ def test_documentation_builds_without_warnings(tmp_path):
     pytest.importorskip("sphinx", reason="the docs extra is not installed")
     done = subprocess.run(
         [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html", str(DOCS), str(tmp_path / "html")],
-        cwd=tmp_path, capture_output=True, text=True, timeout=600, check=False,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
     )  # fmt: skip (cwd: the installed package, not the checkout's sources, is documented)
     assert done.returncode == 0, done.stdout + done.stderr
     api = (tmp_path / "html" / "api.html").read_text()
