@@ -184,3 +184,14 @@ def test_visible_cells_and_points_of_a_convex_mesh_face_the_eye():
     part = scene.extract_visible(camera)
     assert part.n_cells == len(cells)
     np.testing.assert_array_equal(np.sort(part["vtkOriginalCellIds"]), cells)
+
+
+def test_one_shot_cast_takes_layers_crossing_arrays_and_panoramas():
+    mesh = bumpy_sphere(3)
+    scene = vrc.Scene(mesh)
+    for options in ({"layers": 2}, {"arrays": ["HitCount", "Depth"]}):
+        once, built = vrc.cast(mesh, CAMERA, **options), scene.cast(CAMERA, **options)
+        for name in built.array_names:
+            np.testing.assert_array_equal(once[name], built[name], err_msg=name)
+    panorama = vrc.Panorama((0.0, 0.0, 0.0), 32, 16)
+    np.testing.assert_array_equal(vrc.cast(mesh, panorama)["Depth"], scene.cast(panorama)["Depth"])

@@ -23,7 +23,9 @@ __all__ = [
     "GEOMETRY_ARRAYS",
     "MeshArrays",
     "allocate",
+    "gather_at_hits",
     "mesh_arrays",
+    "miss_value",
     "output_bytes",
     "request_outputs",
     "row_layout",
@@ -145,3 +147,60 @@ def request_outputs(
         request.composite_ids = mesh.composite_ids
     if found.cell.keys() & buffers.keys():
         request.surface_cell_ids = mesh.surface_cell_ids
+
+
+def gather_at_hits(mesh, names: list[str], triangle_id: np.ndarray, barycentric: np.ndarray) -> dict[str, np.ndarray]:
+    """The output arrays ``names`` for hits ``triangle_id`` (-1 = miss) with weights
+    ``barycentric``, computed in numpy from a :class:`~vtkraycast.mesh.PreparedMesh` (Depth
+    and Barycentric excepted, which come from the ray-triangle test itself): for depth
+    layers, whose hits come from every crossing rather than from the core's cast."""
+    found = mesh_arrays(mesh)
+    point_arrays, cell_arrays = found.point, found.cell
+    real = barycentric.dtype
+    hit = triangle_id >= 0
+    hit_ids = triangle_id[hit]
+    corners = mesh.triangles[hit_ids].astype(np.int64)
+    weights = barycentric[hit].astype(np.float64)
+
+    def scatter(values: np.ndarray) -> np.ndarray:
+        missing = np.nan if np.issubdtype(values.dtype, np.inexact) else 0
+        full = np.full((triangle_id.shape[0],) + values.shape[1:], missing, dtype=values.dtype)
+        full[hit] = values
+        return full
+
+    def interpolate(values: np.ndarray) -> np.ndarray:
+        if np.issubdtype(values.dtype, np.floating):  # integer arrays cannot be averaged
+            shape = (-1,) + (1,) * (values.ndim - 1)
+            acc = sum(weights[:, c].reshape(shape) * values[corners[:, c]].astype(np.float64) for c in range(3))
+            return acc.astype(values.dtype, copy=False)
+        return values[corners[np.arange(corners.shape[0]), np.argmax(weights, axis=1)]]
+
+    out: dict[str, np.ndarray] = {}
+    for name in names:
+        if name == "TriangleId":
+            out[name] = triangle_id
+        elif name == "CellId":
+            out[name] = np.where(hit, mesh.cell_ids[np.maximum(triangle_id, 0)] if mesh.n_triangles else -1, -1)
+        elif name == "CompositeIndex":
+            out[name] = np.where(hit, mesh.composite_ids[np.maximum(triangle_id, 0)] if mesh.n_triangles else -1, -1)
+        elif name == "vtkValidPointMask":
+            out[name] = hit.astype(np.uint8)
+        elif name == "Position":
+            out[name] = scatter(np.einsum("nc,ncd->nd", weights, mesh.points[corners]).astype(real))
+        elif name == "Normal":
+            p = mesh.points[corners]
+            n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+            out[name] = scatter((n / np.linalg.norm(n, axis=1, keepdims=True)).astype(real))
+        elif name in point_arrays:
+            out[name] = scatter(interpolate(point_arrays[name]))
+        elif name in cell_arrays:
+            out[name] = scatter(cell_arrays[name][mesh.surface_cell_ids[hit_ids]])
+    return out
+
+
+def miss_value(name: str, dtype: np.dtype) -> float | int:
+    """What output array ``name`` of type ``dtype`` holds on a miss: -1 for ids, NaN for
+    floating types, 0 for other integers."""
+    if name in ("TriangleId", "CellId", "CompositeIndex"):
+        return -1
+    return np.nan if np.dtype(dtype).kind == "f" else 0

@@ -223,16 +223,7 @@ class RayCastFilter(VTKPythonAlgorithmBase):
                 self._cast_block(output, out_info.GetInformationObject(0), data)
                 return 1
             self._scene._cast_into(
-                output,
-                self._view(data),
-                world_space=self._world_space,
-                arrays=self._arrays,
-                strategy=self._strategy,
-                precision=self._precision,
-                threads=self._threads,
-                backface_culling=self._backface_culling,
-                interpolate=self._interpolate,
-                progress=self._progress,
+                output, self._view(data), world_space=self._world_space, progress=self._progress, **self._options()
             )
         except InterruptedError:
             output.Initialize()  # aborted on request (AbortExecuteOn): not an error
@@ -242,19 +233,21 @@ class RayCastFilter(VTKPythonAlgorithmBase):
             return self._report(error)
         return 1
 
+    def _options(self) -> dict[str, Any]:
+        """The cast's options, as the properties set them."""
+        return {
+            "arrays": self._arrays,
+            "strategy": self._strategy,
+            "precision": self._precision,
+            "threads": self._threads,
+            "backface_culling": self._backface_culling,
+            "interpolate": self._interpolate,
+        }
+
     def _cast_block(self, output: vtkImageData, info: Any, data: vtkDataObject) -> None:
         """The collective cast under MPI; this rank's output is the block of rows and
         columns the pipeline asks of it (its update extent)."""
-        camera, arrays = self._scene._cast_parallel(
-            self._view(data),
-            root=None,
-            arrays=self._arrays,
-            strategy=self._strategy,
-            precision=self._precision,
-            threads=self._threads,
-            backface_culling=self._backface_culling,
-            interpolate=self._interpolate,
-        )
+        camera, arrays = self._scene._cast_parallel(self._view(data), root=None, **self._options())
         x0, x1, y0, y1 = info.Get(vtkStreamingDemandDrivenPipeline.UPDATE_EXTENT())[:4]
         fill_image(output, camera, {}, world_space=self._world_space)
         output.SetExtent(x0, x1, y0, y1, 0, 0)

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from .fields import miss_value
+
 __all__ = ["Mpi4pyComm", "VtkController", "communicator", "composite", "default_threads", "triangle_keys"]
 
 #: Key of a miss: above every triangle's.
@@ -172,12 +174,6 @@ def triangle_keys(cell_ids: np.ndarray, global_ids: np.ndarray | None, rank: int
     return global_ids[cell_ids].astype(np.int64) * _PER_CELL + within
 
 
-def _missing(name: str, dtype: np.dtype) -> float | int:
-    if name in ("TriangleId", "CellId", "CompositeIndex"):
-        return -1
-    return np.nan if dtype.kind == "f" else 0
-
-
 def composite(
     comm: VtkController | Mpi4pyComm,
     buffers: dict[str, np.ndarray],
@@ -211,12 +207,12 @@ def composite(
         for name, (dtype, row) in layout.items():
             values = buffers.get(name)
             if values is None:
-                values = np.full((len(hit_keys), *row), _missing(name, dtype), dtype)
+                values = np.full((len(hit_keys), *row), miss_value(name, dtype), dtype)
             values = values.astype(dtype, copy=False)
             for rank, message in enumerate(received):
                 if rank != target:
                     indices, arrays = message
-                    values[indices] = arrays[name] if name in arrays else _missing(name, dtype)
+                    values[indices] = arrays[name] if name in arrays else miss_value(name, dtype)
             out[name] = values
     if root is None:
         out = {

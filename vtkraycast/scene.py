@@ -256,9 +256,8 @@ class Scene:
         if isinstance(camera, Panorama):
             return self._cast_panorama(camera, options)
         camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
-        arrays = options.get("arrays")
-        wanted = [arrays] if isinstance(arrays, str) else list(arrays or [])
-        along = [name for name in wanted if name in CROSSING_ARRAYS]
+        wanted = _names(options.get("arrays"))
+        along = _along(wanted)
         if along or layers != 1:
             return self._cast_crossings(camera, layers, wanted, along, options)
         if self._comm is not None:
@@ -452,7 +451,8 @@ class Scene:
                 merged.setdefault(name, rank_layout.get(name) or row_layout(found, name, real))
         local = [name for name in merged if name in GEOMETRY_ARRAYS or name in found.point or name in found.cell]
         needed = list(dict.fromkeys([*local, "Depth", "TriangleId"]))
-        options.setdefault("threads", self._threads)
+        if options.get("threads") is None:  # (the node's cores shared among its ranks)
+            options["threads"] = self._threads
         options.pop("world_space", None)
         _, buffers = self._cast_into(None, camera, arrays=needed, **options)
         triangle = buffers["TriangleId"]
@@ -463,7 +463,7 @@ class Scene:
         if self._mesh.global_cell_ids is not None and "CellId" in buffers:
             cells = buffers["CellId"]
             cells[cells >= 0] = self._mesh.global_cell_ids[cells[cells >= 0]]
-        tie = 32 * float(np.finfo(real).eps)
+        tie = 32 * float(np.finfo(real).eps)  # the kernels' tie window (kTieTolerance, traverse.hpp)
         return camera, composite(comm, buffers, hit_keys, dict(merged), root, tie)
 
     def _cast_into(
@@ -682,11 +682,7 @@ class Scene:
         >>> hits["ray_splits"].tolist(), hits["t"].tolist()  # the second ray meets an edge
         ([0, 2, 4], [1.5, 2.5, 1.5, 2.5])
         """
-        request, _, (k, j) = self._ray_request(
-            origins, directions, tmin, tmax, "watertight", "float64", "bvh", threads, False
-        )
-        n = request.origins.shape[0]
-        ray, triangle, t, weights = self._crossings(request, counts_only=False)
+        (ray, triangle, t, weights), n, (k, j) = self._crossings(origins, directions, tmin, tmax, threads, False)
         shift_lengths(t, (k - j[ray]) if np.ndim(j) else k - j, "t")
         return {
             "ray_splits": np.searchsorted(ray, np.arange(n + 1)).astype(np.int64),
@@ -697,10 +693,18 @@ class Scene:
             "barycentric": weights,
         }
 
-    def _crossings(self, request: _core.Request, *, counts_only: bool) -> tuple[np.ndarray, ...]:
-        return _core.intersect_all(
+    def _crossings(
+        self, origins: Any, directions: Any, tmin: float, tmax: float, threads: int | None, counts_only: bool
+    ) -> tuple[tuple[np.ndarray, ...], Any, tuple]:
+        """The core's crossings of the rays (checked and scaled as :meth:`intersect`'s, tested
+        exactly), and the batch size or shape (counts_only) and the length shifts."""
+        request, shape, shifts = self._ray_request(
+            origins, directions, tmin, tmax, "watertight", "float64", "bvh", threads, False
+        )
+        found = _core.intersect_all(
             self._core, request.origins, request.directions, request.tmin, request.tmax, request.threads, counts_only
         )
+        return found, shape if counts_only else request.origins.shape[0], shifts
 
     def count_intersections(
         self, origins: Any, directions: Any, *, tmin: float = 0.0, tmax: float = math.inf, threads: int | None = None
@@ -715,10 +719,7 @@ class Scene:
         >>> vrc.Scene(pv.Sphere()).count_intersections([0, 0, -2], [[0, 0, 1], [0, 1, 0]]).tolist()
         [2, 0]
         """
-        request, shape, _ = self._ray_request(
-            origins, directions, tmin, tmax, "watertight", "float64", "bvh", threads, False
-        )
-        counts, _ = self._crossings(request, counts_only=True)
+        (counts, _), shape, _ = self._crossings(origins, directions, tmin, tmax, threads, True)
         return counts.reshape(shape)
 
     def contains(self, points: Any, *, threads: int | None = None) -> np.ndarray:
@@ -742,10 +743,7 @@ class Scene:
         points = np.asarray(points, dtype=np.float64)
         # (any direction gives the same answer; one in no face's plane of common meshes)
         direction = np.array([0.5773502691896257, 0.5773502691896258, 0.5773502691896256])
-        request, shape, _ = self._ray_request(
-            points, direction, 0.0, math.inf, "watertight", "float64", "bvh", threads, False
-        )
-        counts, on_surface = self._crossings(request, counts_only=True)
+        (counts, on_surface), shape, _ = self._crossings(points, direction, 0.0, math.inf, threads, True)
         return ((counts % 2 == 1) | on_surface.view(bool)).reshape(shape)
 
     def _check_closed(self) -> None:
@@ -808,6 +806,15 @@ def _ray_arrays(arrays: Iterable[str] | str | None, composite: bool) -> list[str
     return list(dict.fromkeys(names))
 
 
+def _names(arrays: Iterable[str] | str | None) -> list[str]:
+    return [arrays] if isinstance(arrays, str) else list(arrays or [])
+
+
+def _along(names: list[str]) -> list[str]:
+    """The names of arrays computed from every crossing along the pixel ray."""
+    return [name for name in names if name in CROSSING_ARRAYS]
+
+
 def _batched(values: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return values.reshape(shape + values.shape[1:])
 
@@ -858,13 +865,22 @@ def cast(mesh: Any, camera: Camera | Any, *, comm: Any = None, root: int | None 
     >>> int(image["vtkValidPointMask"].sum()) > 0
     True
     """
-    camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
-    scene = one_shot_scene(mesh, camera, threads=options.get("threads"), comm=comm)
+    if not isinstance(camera, Panorama):
+        camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
+    arrays = options.get("arrays")
+    crossings = options.get("layers", 1) != 1 or bool(
+        set([arrays] if isinstance(arrays, str) else arrays or []) & set(CROSSING_ARRAYS)
+    )
+    scene = one_shot_scene(mesh, camera, threads=options.get("threads"), comm=comm, rays=crossings)
     return scene.cast(camera, root=root, **options)
 
 
-def one_shot_scene(mesh: Any, camera: Camera, *, threads: int | None = None, comm: Any = None) -> Scene:
+def one_shot_scene(
+    mesh: Any, camera: Camera | Panorama, *, threads: int | None = None, comm: Any = None, rays: bool = False
+) -> Scene:
     """The scene one cast from ``camera`` needs: without a BVH (its triangles are binned to
     the image's tiles) unless the image is wider or higher than binning allows
-    (``_core.max_binned_pixels``)."""
-    return Scene(mesh, threads=threads, bvh=max(camera.nx, camera.ny) > _core.max_binned_pixels, comm=comm)
+    (``_core.max_binned_pixels``), or its rays go one by one (a panorama; ``rays``: layers
+    and the arrays of every crossing)."""
+    binned = isinstance(camera, Camera) and not rays and max(camera.nx, camera.ny) <= _core.max_binned_pixels
+    return Scene(mesh, threads=threads, bvh=not binned, comm=comm)

@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pyvista
 
+from .fields import gather_at_hits
+
 __all__ = [
     "bumpy_sphere",
     "camera_rays",
@@ -109,52 +111,6 @@ def star_mesh(cam, step: int = 2):
     return pyvista.PolyData(np.array(points), faces=faces)
 
 
-def reference_arrays(mesh, names: list[str], triangle_id: np.ndarray, barycentric: np.ndarray) -> dict[str, np.ndarray]:
-    """The output arrays ``names`` for hits ``triangle_id`` (-1 = miss) with weights
-    ``barycentric``, computed in numpy from a :class:`~vtkraycast.mesh.PreparedMesh`: an
-    independent reference for the arrays the core assembles (Depth and Barycentric
-    excepted, which come from the ray-triangle test itself)."""
-    from .fields import mesh_arrays
-
-    found = mesh_arrays(mesh)
-    point_arrays, cell_arrays = found.point, found.cell
-    real = barycentric.dtype
-    hit = triangle_id >= 0
-    hit_ids = triangle_id[hit]
-    corners = mesh.triangles[hit_ids].astype(np.int64)
-    weights = barycentric[hit].astype(np.float64)
-
-    def scatter(values: np.ndarray) -> np.ndarray:
-        missing = np.nan if np.issubdtype(values.dtype, np.inexact) else 0
-        full = np.full((triangle_id.shape[0],) + values.shape[1:], missing, dtype=values.dtype)
-        full[hit] = values
-        return full
-
-    def interpolate(values: np.ndarray) -> np.ndarray:
-        if np.issubdtype(values.dtype, np.floating):  # integer arrays cannot be averaged
-            shape = (-1,) + (1,) * (values.ndim - 1)
-            acc = sum(weights[:, c].reshape(shape) * values[corners[:, c]].astype(np.float64) for c in range(3))
-            return acc.astype(values.dtype, copy=False)
-        return values[corners[np.arange(corners.shape[0]), np.argmax(weights, axis=1)]]
-
-    out: dict[str, np.ndarray] = {}
-    for name in names:
-        if name == "TriangleId":
-            out[name] = triangle_id
-        elif name == "CellId":
-            out[name] = np.where(hit, mesh.cell_ids[np.maximum(triangle_id, 0)] if mesh.n_triangles else -1, -1)
-        elif name == "CompositeIndex":
-            out[name] = np.where(hit, mesh.composite_ids[np.maximum(triangle_id, 0)] if mesh.n_triangles else -1, -1)
-        elif name == "vtkValidPointMask":
-            out[name] = hit.astype(np.uint8)
-        elif name == "Position":
-            out[name] = scatter(np.einsum("nc,ncd->nd", weights, mesh.points[corners]).astype(real))
-        elif name == "Normal":
-            p = mesh.points[corners]
-            n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-            out[name] = scatter((n / np.linalg.norm(n, axis=1, keepdims=True)).astype(real))
-        elif name in point_arrays:
-            out[name] = scatter(interpolate(point_arrays[name]))
-        elif name in cell_arrays:
-            out[name] = scatter(cell_arrays[name][mesh.surface_cell_ids[hit_ids]])
-    return out
+#: The numpy gather of output arrays at given hits (fields.gather_at_hits): independent of
+#: the core's C++ assembly, so the tests compare the core's arrays with it.
+reference_arrays = gather_at_hits

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .fields import GEOMETRY_ARRAYS, mesh_arrays, select_arrays
+from .fields import gather_at_hits, mesh_arrays, select_arrays
 
 if TYPE_CHECKING:
     from .camera import Camera
@@ -62,8 +62,6 @@ def layered_arrays(
 ) -> dict[str, np.ndarray]:
     """The arrays of a cast with ``layers`` depth layers: rows ``l * nx * ny + pixel`` hold
     the (l + 1)-th crossing along each pixel ray (misses where it has fewer)."""
-    from .testing import reference_arrays  # (numpy gathers of the mesh's arrays; imports pyvista)
-
     found = mesh_arrays(scene.prepared)
     names = [n for n in select_arrays(found, arrays, interpolate) if n not in CROSSING_ARRAYS]
     hits, _, depth_per_t = _pixel_crossings(scene, camera, threads)
@@ -76,7 +74,7 @@ def layered_arrays(
     triangle[rows] = hits["triangle_id"][shown]
     weights = np.full((layers * n, 3), np.nan)
     weights[rows] = hits["barycentric"][shown]
-    out = reference_arrays(scene.prepared, [m for m in names if m not in ("Depth", "Barycentric")], triangle, weights)
+    out = gather_at_hits(scene.prepared, [m for m in names if m not in ("Depth", "Barycentric")], triangle, weights)
     out["Barycentric"] = weights
     if "Depth" in names:
         depth = np.full(layers * n, np.nan)
@@ -108,6 +106,3 @@ def visible_points(scene: Scene, camera: Camera, tolerance: float, threads: int 
     seen = np.flatnonzero(in_view)
     blocked = scene.occluded(origins[seen], (p - origins)[seen], tmax=1 - tolerance, threads=threads)
     return used[seen[~blocked]]
-
-
-assert set(CROSSING_ARRAYS).isdisjoint(GEOMETRY_ARRAYS)
