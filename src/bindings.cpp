@@ -142,7 +142,6 @@ struct Request {
     std::optional<IdsOut> triangle_id, cell_id, composite_index;
     std::optional<MaskOut> valid;
     std::optional<AnyArray> depth, barycentric, position, normal;
-    std::optional<Triangles> mesh_triangles;
     std::optional<CellMap> cell_ids, surface_cell_ids, composite_ids;
     std::vector<FieldRequest> fields;
 };
@@ -215,9 +214,6 @@ vrc::Outputs<Real> outputs(const vrc::Scene& scene, const Request& q, std::size_
         if (f.out.dtype() != f.values.dtype()) throw std::invalid_argument("a field's output must be of its input's type");
         const std::size_t components = row_size(f.out, n, "a field's output");
         if (f.per_point) {
-            if (!q.mesh_triangles || q.mesh_triangles->shape(0) != n_tri)
-                throw std::invalid_argument("point fields need the mesh's triangles");
-            out.mesh_triangles = q.mesh_triangles->data();
             if (row_size(f.values, scene.input_points, "a point field") != components)
                 throw std::invalid_argument("a point field's output must have as many components as the field");
         } else {
@@ -225,7 +221,7 @@ vrc::Outputs<Real> outputs(const vrc::Scene& scene, const Request& q, std::size_
             if (f.values.ndim() == 0 || row_size(f.values, f.values.shape(0), "a cell field") != components)
                 throw std::invalid_argument("a cell field's output must have as many components as the field");
         }
-        out.fields.push_back({f.values.data(), f.out.data(), type, uint32_t(components), f.per_point});
+        out.fields.push_back({f.values.data(), f.out.data(), type, uint32_t(components), f.per_point, f.values.itemsize() * components});
     }
     return out;
 }
@@ -364,7 +360,6 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         .def_rw("barycentric", &Request::barycentric, nb::arg().none())
         .def_rw("position", &Request::position, nb::arg().none())
         .def_rw("normal", &Request::normal, nb::arg().none())
-        .def_rw("mesh_triangles", &Request::mesh_triangles, nb::arg().none())
         .def_rw("cell_ids", &Request::cell_ids, nb::arg().none())
         .def_rw("composite_ids", &Request::composite_ids, nb::arg().none())
         .def_rw("surface_cell_ids", &Request::surface_cell_ids, nb::arg().none())

@@ -53,6 +53,9 @@ struct Scene {
     std::vector<double> points;       ///< (n_points, 3) world coordinates, in order of first use
     std::vector<uint32_t> triangles;  ///< (n_triangles, 3) point indices, in leaf order
     std::vector<uint32_t> prim_ids;   ///< leaf-order position -> input triangle index
+    /// Scene point -> input point: a hit's corners as rows of the mesh's point arrays, read
+    /// through the triangle the kernel has just loaded and a table in the same order.
+    std::vector<uint32_t> point_ids;
     std::size_t input_points = 0;     ///< points of the input mesh (point fields have a row each)
     std::vector<Node> nodes;          ///< nodes[0] is the root; empty when there are no triangles
     CameraTree camera;                ///< the hierarchy as camera casts go through it
@@ -70,6 +73,8 @@ struct Scene {
     /// False for a flat scene (triangles but no hierarchy: one camera cast's worth).
     [[nodiscard]] bool has_bvh() const { return !nodes.empty() || prim_ids.empty(); }
     [[nodiscard]] const double* point(uint32_t i) const { return points.data() + 3 * std::size_t(i); }
+    /// Row of the mesh's point arrays of corner c of triangle i (leaf order).
+    [[nodiscard]] uint32_t input_point(uint32_t i, int c) const { return point_ids[triangles[3 * std::size_t(i) + c]]; }
     /// Asks the cache for triangle i's points (leaf order), ahead of a kernel reading them.
     void prefetch_points(uint32_t i) const {
         for (int k = 0; k < 3; ++k) __builtin_prefetch(point(triangles[3 * std::size_t(i) + k]));
@@ -78,7 +83,7 @@ struct Scene {
     /// working memory kept from camera casts.
     [[nodiscard]] std::size_t memory_bytes() const {
         return points.size() * sizeof(double) + triangles.size() * sizeof(uint32_t) +
-               prim_ids.size() * sizeof(uint32_t) + nodes.size() * sizeof(Node) +
+               (prim_ids.size() + point_ids.size()) * sizeof(uint32_t) + nodes.size() * sizeof(Node) +
                camera.nodes.size() * sizeof(CameraTree::Link) + wide.size() * sizeof(WideNode) +
                (camera.leaf_offsets.size() + camera.leaf_points.size()) * sizeof(uint32_t) + scratch->bytes();
     }
@@ -97,7 +102,7 @@ void frame_scene(Scene& scene, const double* points, const uint32_t* triangles, 
 
 /// Copies into the scene the points its triangles use, in the order they first use them,
 /// and renumbers the triangles: neighbouring triangles (in leaf order, or a mesh's own order)
-/// then read neighbouring points. Unused points are dropped.
+/// then read neighbouring points. Unused points are dropped; point_ids keeps the input's.
 void order_points(Scene& scene, const double* points, std::size_t n_points);
 
 /// Sets the scene's camera tree from its BVH, once the points are in order.

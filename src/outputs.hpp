@@ -29,6 +29,7 @@ struct Field {
     Dtype dtype;
     uint32_t components;
     bool per_point;
+    std::size_t row_bytes;  ///< bytes per row of `values`
 };
 
 /// What a cast writes, each a caller-owned array with a row per ray, or null when not asked
@@ -44,7 +45,6 @@ struct Outputs {
     Real* position = nullptr;        ///< (n, 3) hit point, the weights applied to the points
     Real* normal = nullptr;          ///< (n, 3) unit geometric normal (right-hand rule), NaN on a miss
     std::vector<Field> fields;
-    const uint32_t* mesh_triangles = nullptr;    ///< (input triangles, 3) input point ids (point fields)
     const int64_t* cell_ids = nullptr;           ///< input triangle -> input cell (CellId)
     const int64_t* composite_ids = nullptr;      ///< input triangle -> leaf (CompositeIndex)
     const int64_t* surface_cell_ids = nullptr;   ///< input triangle -> row of the cell arrays
@@ -63,7 +63,9 @@ class OutputWriter {
     static constexpr Real kNaN = std::numeric_limits<Real>::quiet_NaN();
 
    public:
-    OutputWriter(const Scene& scene, const Outputs<Real>& out) : scene_(scene), out_(out) {}
+    OutputWriter(const Scene& scene, const Outputs<Real>& out)
+        : scene_(scene), out_(out),
+          point_fields_(std::any_of(out.fields.begin(), out.fields.end(), [](const Field& f) { return f.per_point; })) {}
 
     /// Ray k's closest hit (or a miss when none is found); `ray` is read on hits only.
     void operator()(std::size_t k, const Ray& ray, const Hit<Real>& hit) const {
@@ -80,8 +82,12 @@ class OutputWriter {
                 out_.position[3 * k + a] = static_cast<Real>(p);
             }
         }
-        for (const Field& f : out_.fields)
-            if (f.per_point) interpolate(f, k, out_.mesh_triangles + 3 * std::size_t(input), hit.b);
+        if (point_fields_) {
+            const uint32_t corners[3] = {scene_.input_point(hit.prim, 0), scene_.input_point(hit.prim, 1),
+                                         scene_.input_point(hit.prim, 2)};
+            for (const Field& f : out_.fields)
+                if (f.per_point) interpolate(f, k, corners, hit.b);
+        }
     }
 
     /// Ray k's hit is triangle `prim` (leaf order), known without its depth or weights
@@ -91,6 +97,18 @@ class OutputWriter {
     /// Asks the cache for what storing a hit on triangle `prim` reads first (its input
     /// triangle index: scattered, mostly a miss).
     void prefetch(uint32_t prim) const { __builtin_prefetch(scene_.prim_ids.data() + prim); }
+
+    /// Asks the cache for the rows of the point arrays the hits on triangles `prims` read
+    /// (scattered in the mesh's point order: the interpolation's loads stalled on them).
+    void prefetch_rows(const uint32_t* prims, std::size_t n) const {
+        if (!point_fields_) return;
+        for (std::size_t i = 0; i < n; ++i)
+            for (int c = 0; c < 3; ++c) {
+                const std::size_t row = scene_.input_point(prims[i], c);
+                for (const Field& f : out_.fields)
+                    if (f.per_point) __builtin_prefetch(static_cast<const char*>(f.values) + row * f.row_bytes);
+            }
+    }
 
     /// Misses for rays k to k + n - 1.
     void misses(std::size_t k, std::size_t n) const {
@@ -180,6 +198,7 @@ class OutputWriter {
 
     const Scene& scene_;
     const Outputs<Real>& out_;
+    bool point_fields_;  ///< whether any field is a point field
 };
 
 }  // namespace vrc

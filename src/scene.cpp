@@ -43,9 +43,12 @@ void order_points(Scene& scene, const double* points, std::size_t n_points) {
     std::vector<double>().swap(scene.points);
     reserve_huge(scene.points, 3 * std::size_t(n_used));
     scene.points.resize(3 * std::size_t(n_used));
+    scene.point_ids.resize(n_used);
     for (std::size_t p = 0; p < n_points; ++p)
-        if (index[p] != kUnused)
+        if (index[p] != kUnused) {
             for (int k = 0; k < 3; ++k) scene.points[3 * std::size_t(index[p]) + k] = points[3 * p + k];
+            scene.point_ids[index[p]] = uint32_t(p);
+        }
 }
 
 Scene flat_scene(const double* points, std::size_t n_points, const uint32_t* triangles, std::size_t n_triangles) {

@@ -74,8 +74,8 @@ class TileTracer {
 
     /// Traces the tile's rays as one packet and writes each pixel's hit with `store`
     /// (store(pixel, ray, hit) for a ray made, store.settled(pixel, triangle) for a sure
-    /// hit, store.misses(pixel, n) for a run of misses; store.prefetch(triangle) first, for
-    /// all the hits of the tile).
+    /// hit, store.misses(pixel, n) for a run of misses; first store.prefetch(triangle) for
+    /// each hit of the tile, then store.prefetch_rows(triangles, n) for all of them).
     template <class Store>
     void trace(std::size_t tile, Store&& store) {
         const CameraRays::TilePixels t = rays_.tile_pixels(tile);
@@ -174,14 +174,17 @@ class TileTracer {
     template <class Store>
     void finish(Store& store) {
         uint64_t hits[kStride];
+        std::size_t n_hits = 0;
         for (int64_t r = 0; r < height_; ++r) {
             hits[r] = sure_bits_[r];
             for (uint64_t m = made_[r]; m != 0; m &= m - 1) {
                 const int64_t j = __builtin_ctzll(m) + r * kStride;
-                if (hit_[j].found()) hits[r] |= uint64_t(1) << (j % kStride), store.prefetch(hit_[j].prim);
+                if (hit_[j].found()) hits[r] |= uint64_t(1) << (j % kStride), store.prefetch(hit_prims_[n_hits++] = hit_[j].prim);
             }
-            for (uint64_t m = sure_bits_[r]; m != 0; m &= m - 1) store.prefetch(sure_[__builtin_ctzll(m) + r * kStride]);
+            for (uint64_t m = sure_bits_[r]; m != 0; m &= m - 1)
+                store.prefetch(hit_prims_[n_hits++] = sure_[__builtin_ctzll(m) + r * kStride]);
         }
+        store.prefetch_rows(hit_prims_, n_hits);
         for (int64_t r = 0; r < height_; ++r)
             for (int64_t c = 0; c < width_;) {
                 const int64_t j = c + r * kStride;
@@ -490,6 +493,7 @@ class TileTracer {
     static constexpr bool kSureHits = false;  // (they come with the AVX2 leaf loop, which knows triangles' depths)
 #endif
     std::vector<uint32_t> sure_;   // the sure hit of each such pixel
+    uint32_t hit_prims_[kStride * kStride];  // the block's hit triangles, for finish's prefetches
     std::vector<Ray> ray_;                       // ray_, kernel_ and hit_: set for the rays made only
     std::vector<std::optional<Kernel>> kernel_;  // (optional: kernels have no default state)
     std::vector<Hit<Real>> hit_;

@@ -187,7 +187,6 @@ def test_bad_requests_raise_instead_of_writing_out_of_bounds():
         _core.cast(scene._core, request(cell_id=np.empty(64, np.int64)))
     q = request()
     q.add_field(np.zeros(3), np.empty(64), True)  # a point field of the wrong length
-    q.mesh_triangles = scene.prepared.triangles
     with pytest.raises(ValueError, match="point field"):
         _core.cast(scene._core, q)
     q = request()

@@ -139,8 +139,6 @@ def request_outputs(
         if values.shape[0] != rows[kind]:  # (VTK lets an array's length disagree with its mesh)
             raise ValueError(f"{kind} array {name!r} has {values.shape[0]} tuples for {rows[kind]} {kind}s")
         request.add_field(values, out, kind == "point")
-    if found.point.keys() & buffers.keys():
-        request.mesh_triangles = mesh.triangles
     if "CellId" in buffers:
         request.cell_ids = mesh.cell_ids
     if "CompositeIndex" in buffers:
