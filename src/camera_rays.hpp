@@ -41,11 +41,17 @@ class CameraRays {
     }
     /// The ray of pixel column i, row r.
     [[nodiscard]] Ray ray(int64_t i, int64_t r) const {
+        Ray ray;
+        set_ray(ray, i, r);
+        return ray;
+    }
+    /// Sets `ray` to the ray of pixel column i, row r, in place (the tiles keep a ray per
+    /// pixel: no copy of one).
+    void set_ray(Ray& ray, int64_t i, int64_t r) const {
         const int64_t j = c_.ny - 1 - r;
         // (divisions done once, in the constructor: the same values)
         const double x = (c_.shift_x - c_.width * 0.5) + pitch_x_ * (double(i) + 0.5);
         const double y = (c_.shift_y + c_.height * 0.5) - pitch_y_ * (double(j) + 0.5);
-        Ray ray;
         ray.tmin = tmin_;
         ray.tmax = tmax_;
         if (c_.parallel) {
@@ -53,16 +59,51 @@ class CameraRays {
                 ray.org[k] = c_.eye[k] + x * c_.u[k] + y * c_.v[k];
                 ray.dir[k] = -c_.w[k];
             }
-            ray.t_unit = 1.0;
         } else {
             for (int k = 0; k < 3; ++k) {
                 ray.org[k] = c_.eye[k];
                 ray.dir[k] = x * c_.u[k] + y * c_.v[k] - dw_[k];
             }
-            ray.t_unit = c_.d;  // depth = t d
         }
+        ray.t_unit = t_unit();
+        ray.t_exponent = 0;
         ray.normalize_direction();
-        return ray;
+    }
+
+    /// Depth per unit of t (before a ray's normalisation): d, or 1 for parallel rays.
+    [[nodiscard]] double t_unit() const { return c_.parallel ? 1.0 : c_.d; }
+
+    /// The rays of four pixels (columns i, rows r) in lanes, each bit for bit as set_ray
+    /// makes it, and in `exponent` each one's Ray::t_exponent. Returns the lanes made so:
+    /// the others' directions lie beyond normalize_direction's common case (set_ray's).
+    unsigned rays4(const int64_t i[4], const int64_t r[4], Rays4& out, int exponent[4]) const {
+        using D = Double4;
+        using M = Mask4;
+        const D col = D{double(i[0]), double(i[1]), double(i[2]), double(i[3])};
+        const D row = D{double(c_.ny - 1 - r[0]), double(c_.ny - 1 - r[1]), double(c_.ny - 1 - r[2]), double(c_.ny - 1 - r[3])};
+        const D x = (c_.shift_x - c_.width * 0.5) + pitch_x_ * (col + 0.5);
+        const D y = (c_.shift_y + c_.height * 0.5) - pitch_y_ * (row + 0.5);
+        const auto splat = [](double v) { return D{v, v, v, v}; };  // (0 + v would turn -0 into +0)
+        for (int k = 0; k < 3; ++k) {
+            if (c_.parallel) {
+                out.org[k] = c_.eye[k] + x * c_.u[k] + y * c_.v[k];
+                out.dir[k] = splat(-c_.w[k]);
+            } else {
+                out.org[k] = splat(c_.eye[k]);
+                out.dir[k] = x * c_.u[k] + y * c_.v[k] - dw_[k];
+            }
+        }
+        const auto abs = [](D v) { return D(M(v) & INT64_MAX); };
+        const D ax = abs(out.dir[0]), ay = abs(out.dir[1]), az = abs(out.dir[2]);
+        const D m = ax > ay ? (ax > az ? ax : az) : (ay > az ? ay : az);
+        const M e = ((M(m) >> 52) & 0x7ff) - 1023;
+        const D down = D((1023 - e) << 52), up = D((1023 + e) << 52);
+        for (D& d : out.dir) d *= down;
+        out.tmin = tmin_ * up;
+        out.tmax = tmax_ * up;
+        for (int l = 0; l < 4; ++l) exponent[l] = -int(e[l]);
+        const M common = (m >= 0x1p-500) & (m < 0x1p500);
+        return unsigned(common[0] & 1) | unsigned(common[1] & 2) | unsigned(common[2] & 4) | unsigned(common[3] & 8);
     }
 
     /// Square tiles of kTile x kTile pixels: neighbouring rays traverse the same nodes.

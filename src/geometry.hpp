@@ -16,6 +16,12 @@ namespace vrc {
 using Double4 = double __attribute__((vector_size(32)));
 using Mask4 = int64_t __attribute__((vector_size(32)));
 
+/// Four rays in the lanes of Double4s (Ray's fields, the direction normalised as
+/// Ray::normalize_direction does).
+struct Rays4 {
+    Double4 org[3], dir[3], tmin, tmax;
+};
+
 /// Whether any lane of a comparison holds.
 inline bool any(Mask4 m) {
 #if defined(__AVX__)

@@ -22,6 +22,7 @@
 #include "camera_rays.hpp"
 #include "bin_triangles.hpp"
 #include "kernel_watertight.hpp"
+#include "kernel_watertight4.hpp"
 #include "projected_scene.hpp"
 #include "traverse.hpp"
 
@@ -53,7 +54,7 @@ class TileTracer {
     TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, const CastContext& context,
                bool by_triangle)
         : scene_(scene), rays_(rays), projected_(projected), context_(context), map_(rays.pixel_map()),
-          sure_allowed_(kSureHits && by_triangle && std::is_same_v<Kernel, Watertight<double>>) {
+          sure_allowed_(kSureHits && std::is_same_v<Kernel, Watertight<double>>), by_triangle_(by_triangle) {
         const int64_t n = kStride * kStride;
         ray_.resize(n);
         kernel_.resize(n);
@@ -185,6 +186,7 @@ class TileTracer {
                 store.prefetch(hit_prims_[n_hits++] = sure_[__builtin_ctzll(m) + r * kStride]);
         }
         store.prefetch_rows(hit_prims_, n_hits);
+        if (!by_triangle_) store_sure_hits(store);
         for (int64_t r = 0; r < height_; ++r)
             for (int64_t c = 0; c < width_;) {
                 const int64_t j = c + r * kStride;
@@ -195,12 +197,65 @@ class TileTracer {
                     c += run;
                     continue;
                 }
-                if (sure_bits_[r] >> c & 1)
-                    store.settled(pixel(j), sure_[j]);
-                else
+                if (sure_bits_[r] >> c & 1) {
+                    if (by_triangle_) store.settled(pixel(j), sure_[j]);  // (else stored already)
+                } else
                     store(pixel(j), ray_[j], hit_[j]);
                 ++c;
             }
+    }
+
+    /// Stores the pixels settled by sure hits when the cast asks for their depth or
+    /// weights: each pixel's ray is made and tested on its sure hit alone (the only triangle
+    /// it can hit first, see test_pixel), four at a time in the lanes of watertight4, or
+    /// with the scalar kernel for a lane it leaves. (Their rays stay in a few registers'
+    /// worth of memory: written into the tile's arrays, they had cost more than the kernel.)
+    template <class Store>
+    void store_sure_hits(Store& store) {
+#if defined(__AVX2__)
+        int64_t lane_pixel[4], col[4], row[4];
+        int n = 0;
+        const auto flush = [&] {
+            for (int l = n; l < 4; ++l) col[l] = col[0], row[l] = row[0], lane_pixel[l] = lane_pixel[0];
+            Rays4 rays;
+            int exponent[4];
+            const unsigned made = rays_.rays4(col, row, rays, exponent);
+            const double* corner[4][3];
+            for (int l = 0; l < 4; ++l) {
+                const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(sure_[lane_pixel[l]]);
+                for (int c = 0; c < 3; ++c) corner[l][c] = scene_.point(tri[c]);
+            }
+            double t[4], b[4][3];
+            const unsigned settled = made & watertight4(rays, corner, context_.cull_back_faces, t, b);
+            for (int l = 0; l < n; ++l) {
+                const int64_t j = lane_pixel[l];
+                Hit<Real> hit;
+                Ray ray;  // (the store reads only the ray's depth scale)
+                if (settled >> l & 1) {
+                    hit.t = t[l], hit.prim = sure_[j];
+                    for (int c = 0; c < 3; ++c) hit.b[c] = b[l][c];
+                    ray.t_unit = rays_.t_unit();
+                    ray.t_exponent = exponent[l];
+                } else {
+                    rays_.set_ray(ray, col[l], row[l]);
+                    double bound = ray.tmax;
+                    test_triangle(Kernel(ray, context_), scene_, sure_[j], ray.tmin, bound, hit);
+                }
+                store(pixel(j), ray, hit);
+            }
+            n = 0;
+        };
+        for (int64_t r = 0; r < height_; ++r)
+            for (uint64_t m = sure_bits_[r]; m != 0; m &= m - 1) {
+                const int64_t j = __builtin_ctzll(m) + r * kStride;
+                col[n] = i0_ + j % kStride, row[n] = r0_ + j / kStride;
+                lane_pixel[n++] = j;
+                if (n == 4) flush();
+            }
+        if (n != 0) flush();
+#else
+        (void)store;
+#endif
     }
 
     /// The image pixel of the block's ray j (column j % kStride, row j / kStride).
@@ -432,14 +487,17 @@ class TileTracer {
     /// Tests triangle i on the block's ray at column c, row r; on a closer hit, the ray's
     /// depth bound follows and this returns true.
     ///
-    /// A sure hit settles a pixel without its ray when only triangle ids are asked for (and
-    /// the kernel is the watertight one in double): the pixel's first
+    /// A sure hit settles a pixel's triangle without its ray (with the watertight kernel in
+    /// double): the pixel's first
     /// candidate, when the kernel surely hits it (ProjectedScene::surely_hit), is recorded
     /// with its depth bounds, and no ray is made. A later candidate is culled when its
     /// nearest depth lies beyond the sure hit's farthest: each bound clears the exact depths
     /// by the depth slack plus 2^-21 relative, far beyond the kernel's rounding of t and its
     /// tie tolerance, so the kernel would rank it behind. Any other candidate makes the ray,
     /// and the kernel tests the sure hit, then it: the kernel decides every close call.
+    /// When the cast asks for the hit's depth or weights, the rays of the pixels still
+    /// settled so are made once the tile is traversed, and tested on their sure hit alone
+    /// (store_sure_hits).
     bool test_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF) {
         const int64_t j = c + r * kStride;
         const uint64_t bit = uint64_t(1) << c;
@@ -469,7 +527,7 @@ class TileTracer {
 
     void make_ray(int64_t j) {
         made_[j / kStride] |= uint64_t(1) << (j % kStride);
-        ray_[j] = rays_.ray(i0_ + j % kStride, r0_ + j / kStride);
+        rays_.set_ray(ray_[j], i0_ + j % kStride, r0_ + j / kStride);
         kernel_[j].emplace(ray_[j], context_);
         hit_[j] = Hit<Real>{};
         bound_[j] = ray_[j].tmax;  // t; depth_bound_ stays unbounded until a hit
@@ -487,6 +545,7 @@ class TileTracer {
     uint64_t made_[kStride];  // per row of the block, a bit for each pixel whose ray is made
     uint64_t sure_bits_[kStride];  // per row, a bit for each pixel settled by a sure hit (not made)
     bool sure_allowed_;            // see test_pixel
+    bool by_triangle_;             // whether the cast asks only for what the hit triangle decides
 #if defined(__AVX2__)
     static constexpr bool kSureHits = true;
 #else
