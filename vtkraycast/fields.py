@@ -16,6 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _core
+from .buffers import BufferPool
 from .mesh import PreparedMesh, numeric_arrays
 
 __all__ = [
@@ -118,11 +119,18 @@ def output_bytes(found: MeshArrays, names: list[str], real: type) -> int:
     return sum(dtype.itemsize * math.prod(shape) for dtype, shape in (row_layout(found, name, real) for name in names))
 
 
-def allocate(found: MeshArrays, names: list[str], n: int, real: type) -> dict[str, np.ndarray]:
+def allocate(
+    found: MeshArrays, names: list[str], n: int, real: type, pool: BufferPool | None = None
+) -> dict[str, np.ndarray]:
     """Uninitialised output arrays for ``n`` rays, in the order of ``names`` (the core
-    writes every element)."""
-    rows = {name: row_layout(found, name, real) for name in names}
-    return {name: np.empty((n, *shape), dtype) for name, (dtype, shape) in rows.items()}
+    writes every element), from ``pool`` when given."""
+    layouts = {}
+    for name in names:
+        dtype, shape = row_layout(found, name, real)
+        layouts[name] = (dtype, (n, *shape))
+    if pool is not None:
+        return pool.allocate(layouts)
+    return {name: np.empty(shape, dtype) for name, (dtype, shape) in layouts.items()}
 
 
 def request_outputs(

@@ -12,6 +12,7 @@ import numpy as np
 from vtkmodules.vtkCommonDataModel import vtkImageData
 
 from . import _core
+from .buffers import BufferPool
 from .camera import Camera
 from .fields import GEOMETRY_ARRAYS, allocate, mesh_arrays, output_bytes, request_outputs, row_layout, select_arrays
 from .image import fill_image, set_arrays
@@ -154,6 +155,7 @@ class Scene:
         self._keys: np.ndarray | None = None  # each triangle's global key, for casts under MPI
         self._closed: bool | None = None  # whether every edge has an even number of triangles
         self._mesh = prepare_mesh(mesh)
+        self._outputs = BufferPool()  # the arrays of the last casts, reused once unreferenced
         points, triangles = self._mesh.points, self._mesh.triangles
         self._core = _core.Scene(points, triangles, _threads(threads), bool(bvh))
         self._scale = scene_scale(self._core.point_bounds)
@@ -179,8 +181,17 @@ class Scene:
     def memory_bytes(self) -> int:
         """Bytes held in the native core: the BVH (if any), the triangles and the points, and
         the working memory kept from camera casts for the next one (16 bytes per point and per
-        BVH node, once the scene has been cast)."""
+        BVH node, once the scene has been cast). Not counted: the output arrays of the last
+        two casts, which the scene keeps to reuse for the next ones once nothing else refers
+        to them (:attr:`kept_output_bytes`: those no image holds any more)."""
         return int(self._core.memory_bytes)
+
+    @property
+    def kept_output_bytes(self) -> int:
+        """Bytes of the output arrays of earlier camera casts that the scene keeps for the next
+        ones (writing into kept memory spares the page faults of fresh arrays) and that no
+        image, array or view holds any more: at most two casts' worth."""
+        return self._outputs.unused_bytes
 
     @property
     def prepared(self):
@@ -513,7 +524,7 @@ class Scene:
         request.shift_x, request.shift_y = (math.ldexp(float(x), window) for x in camera.shift)
         request.near, request.far = _shifted(camera.near, shift), _shifted(camera.far, shift)
         request.nx, request.ny, request.parallel = camera.nx, camera.ny, camera.parallel
-        buffers = allocate(found, names, n, real)
+        buffers = allocate(found, names, n, real, self._outputs)
         request_outputs(request, self._mesh, found, buffers)
         if image is not None:
             # The image and the arrays the core writes are set up before the cast: Python
