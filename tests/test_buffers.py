@@ -99,3 +99,19 @@ def test_filter_outputs_copied_downstream_keep_their_arrays():
     for name, array in kept.items():
         np.testing.assert_array_equal(pv.wrap(downstream)[name], array)
     assert not np.array_equal(pv.wrap(flt.GetOutput())["Depth"], kept["Depth"], equal_nan=True)
+
+
+def test_intersect_results_held_are_never_written_again(scene_and_cameras):
+    scene = scene_and_cameras[0]
+    rng = np.random.default_rng(5)
+    origins = rng.normal(size=(500, 3)) * 3
+    first = scene.intersect(origins, -origins)
+    kept = {name: array.copy() for name, array in first.items()}
+    dropped = {address(scene.intersect(origins, rng.normal(size=(500, 3)))["t"]) for _ in range(4)}
+    assert address(first["t"]) not in dropped
+    for name, array in kept.items():
+        np.testing.assert_array_equal(first[name], array)
+    again = scene.intersect(origins, -origins)
+    assert address(again["t"]) in dropped  # (the dropped results lend their memory)
+    for name, array in kept.items():
+        np.testing.assert_array_equal(again[name], array)

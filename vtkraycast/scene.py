@@ -188,9 +188,10 @@ class Scene:
 
     @property
     def kept_output_bytes(self) -> int:
-        """Bytes of the output arrays of earlier camera casts that the scene keeps for the next
-        ones (writing into kept memory spares the page faults of fresh arrays) and that no
-        image, array or view holds any more: at most two casts' worth."""
+        """Bytes of the output arrays of earlier casts (cameras and :meth:`intersect`) that the
+        scene keeps for the next ones (writing into kept memory spares the page faults of
+        fresh arrays) and that no image, array or view holds any more: at most two casts'
+        worth."""
         return self._outputs.unused_bytes
 
     @property
@@ -623,7 +624,7 @@ class Scene:
             backface_culling,
         )
         found = mesh_arrays(self._mesh)
-        buffers = allocate(found, names, request.origins.shape[0], _precision(precision))
+        buffers = allocate(found, names, request.origins.shape[0], _precision(precision), self._outputs)
         request_outputs(request, self._mesh, found, buffers)
         _core.cast(self._core, request)
         if "Depth" in names:
