@@ -143,6 +143,7 @@ struct Request {
     std::optional<MaskOut> valid;
     std::optional<AnyArray> depth, barycentric, position, normal;
     std::optional<CellMap> cell_ids, surface_cell_ids, composite_ids;
+    bool cells_are_triangles = false;  ///< triangle i came from cell i: cell_ids, surface_cell_ids unread
     std::vector<FieldRequest> fields;
 };
 
@@ -207,7 +208,8 @@ vrc::Outputs<Real> outputs(const vrc::Scene& scene, const Request& q, std::size_
         if (!a || a->shape(0) != n_tri) throw std::invalid_argument(std::string(name) + " must have one row per triangle");
         return a->data();
     };
-    if (out.cell_id) out.cell_ids = per_triangle(q.cell_ids, "cell_ids");
+    out.cells_are_triangles = q.cells_are_triangles;
+    if (out.cell_id && !q.cells_are_triangles) out.cell_ids = per_triangle(q.cell_ids, "cell_ids");
     if (out.composite_index) out.composite_ids = per_triangle(q.composite_ids, "composite_ids");
     for (const FieldRequest& f : q.fields) {
         const vrc::Dtype type = dtype_of(f.values.dtype());
@@ -217,7 +219,12 @@ vrc::Outputs<Real> outputs(const vrc::Scene& scene, const Request& q, std::size_
             if (row_size(f.values, scene.input_points, "a point field") != components)
                 throw std::invalid_argument("a point field's output must have as many components as the field");
         } else {
-            out.surface_cell_ids = per_triangle(q.surface_cell_ids, "surface_cell_ids");
+            if (q.cells_are_triangles) {
+                if (f.values.ndim() == 0 || f.values.shape(0) < n_tri)
+                    throw std::invalid_argument("a cell field must have a row per triangle when cells are triangles");
+            } else {
+                out.surface_cell_ids = per_triangle(q.surface_cell_ids, "surface_cell_ids");
+            }
             if (f.values.ndim() == 0 || row_size(f.values, f.values.shape(0), "a cell field") != components)
                 throw std::invalid_argument("a cell field's output must have as many components as the field");
         }
@@ -363,6 +370,7 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         .def_rw("cell_ids", &Request::cell_ids, nb::arg().none())
         .def_rw("composite_ids", &Request::composite_ids, nb::arg().none())
         .def_rw("surface_cell_ids", &Request::surface_cell_ids, nb::arg().none())
+        .def_rw("cells_are_triangles", &Request::cells_are_triangles)
         .def(
             "add_field",
             [](Request& q, ConstAnyArray values, AnyArray out, bool per_point) {

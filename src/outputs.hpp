@@ -48,6 +48,9 @@ struct Outputs {
     const int64_t* cell_ids = nullptr;           ///< input triangle -> input cell (CellId)
     const int64_t* composite_ids = nullptr;      ///< input triangle -> leaf (CompositeIndex)
     const int64_t* surface_cell_ids = nullptr;   ///< input triangle -> row of the cell arrays
+    /// Input triangle i came from cell i (and row i of the cell arrays): cell_ids and
+    /// surface_cell_ids are then not read (a scattered load per hit spared).
+    bool cells_are_triangles = false;
 
     /// Whether an output needs the hit's exact depth or weights (else a hit known by its
     /// triangle alone is enough: TileTracer's sure hits).
@@ -127,14 +130,19 @@ class OutputWriter {
     uint32_t by_triangle(std::size_t k, uint32_t prim) const {
         const uint32_t input = scene_.prim_ids[prim];
         if (out_.triangle_id) out_.triangle_id[k] = int64_t(input);
-        if (out_.cell_id) out_.cell_id[k] = out_.cell_ids[input];
+        if (out_.cell_id) out_.cell_id[k] = out_.cells_are_triangles ? int64_t(input) : out_.cell_ids[input];
         if (out_.composite_index) out_.composite_index[k] = out_.composite_ids[input];
         if (out_.valid) out_.valid[k] = 1;
         if (out_.normal) unit_normal(prim, out_.normal + 3 * k);
         for (const Field& f : out_.fields)
             if (!f.per_point)
-                with_type(f.dtype, [&](auto zero) { copy_row(f, zero, std::size_t(out_.surface_cell_ids[input]), k); });
+                with_type(f.dtype, [&](auto zero) { copy_row(f, zero, cell_row(input), k); });
         return input;
+    }
+
+    /// The row of the cell arrays of input triangle `input`'s cell.
+    [[nodiscard]] std::size_t cell_row(uint32_t input) const {
+        return out_.cells_are_triangles ? std::size_t(input) : std::size_t(out_.surface_cell_ids[input]);
     }
 
     /// Calls fn with a zero of the field's element type.

@@ -66,6 +66,31 @@ def test_every_mesh_array_matches_numpy_reference(precision, parallel):
             assert_same(np.asarray(image[name]), expected[name], name)
 
 
+@pytest.mark.parametrize("surface", ["triangles", "quads and a triangle strip"])
+def test_cell_ids_and_cell_arrays_with_and_without_a_cell_per_triangle(surface):
+    # An all-triangle mesh's CellId is its TriangleId, written without the cell map (the
+    # core's shortcut); quads and strips give several triangles per cell (the map is read).
+    mesh = pv.Sphere(theta_resolution=24, phi_resolution=16)
+    if surface != "triangles":
+        quads = pv.Plane(center=(0, 0, 0.2), i_resolution=9, j_resolution=7).rotate_x(30)
+        mesh = (mesh + quads + pv.Cylinder(resolution=12).strip()).clean()
+    rng = np.random.default_rng(3)
+    mesh.cell_data["label"] = rng.integers(0, 1000, mesh.n_cells).astype(np.int32)
+    mesh.cell_data["vector"] = rng.uniform(-1, 1, (mesh.n_cells, 3))
+    scene = vrc.Scene(mesh)
+    assert scene.prepared.cells_are_triangles == (surface == "triangles")
+    for camera in (view(), view(parallel=True)):
+        image = scene.cast(camera, arrays=["TriangleId", "CellId", "Barycentric", "label", "vector"])
+        ids = np.asarray(image["TriangleId"])
+        assert (ids >= 0).sum() > 300
+        weights = np.asarray(image["Barycentric"])
+        expected = reference_arrays(scene.prepared, ["CellId", "label", "vector"], ids, weights)
+        for name in ("CellId", "label", "vector"):
+            assert_same(np.asarray(image[name]), expected[name], name)
+        if surface != "triangles":
+            assert not np.array_equal(image["CellId"], ids)
+
+
 def test_integer_point_arrays_take_the_largest_weight_and_floats_interpolate():
     # one triangle, a label per point: each pixel gets the label of its nearest corner
     tri = pv.PolyData(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]]), faces=[3, 0, 1, 2])

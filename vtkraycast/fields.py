@@ -147,11 +147,12 @@ def request_outputs(
         if values.shape[0] != rows[kind]:  # (VTK lets an array's length disagree with its mesh)
             raise ValueError(f"{kind} array {name!r} has {values.shape[0]} tuples for {rows[kind]} {kind}s")
         request.add_field(values, out, kind == "point")
-    if "CellId" in buffers:
+    request.cells_are_triangles = mesh.cells_are_triangles
+    if "CellId" in buffers and not mesh.cells_are_triangles:
         request.cell_ids = mesh.cell_ids
     if "CompositeIndex" in buffers:
         request.composite_ids = mesh.composite_ids
-    if found.cell.keys() & buffers.keys():
+    if found.cell.keys() & buffers.keys() and not mesh.cells_are_triangles:
         request.surface_cell_ids = mesh.surface_cell_ids
 
 

@@ -4,6 +4,7 @@ from every triangle back to the input cell it came from."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -58,6 +59,14 @@ class PreparedMesh:
     @property
     def n_triangles(self) -> int:
         return int(self.triangles.shape[0])
+
+    @cached_property
+    def cells_are_triangles(self) -> bool:
+        """Whether triangle i came from cell i of the input and of ``surface`` for every i
+        (an all-triangle mesh): the core then writes CellId and gathers cell arrays
+        without looking the cell up."""
+        own = np.arange(self.n_triangles, dtype=np.int64)
+        return bool(np.array_equal(self.cell_ids, own) and np.array_equal(self.surface_cell_ids, own))
 
 
 def _cells(cell_array: vtkCellArray) -> tuple[np.ndarray, np.ndarray]:
