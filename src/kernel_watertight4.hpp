@@ -2,8 +2,7 @@
 // kernel in double precision (kernel_watertight.hpp), operation for operation, so a lane's t
 // and weights are the scalar kernel's bit for bit. Camera casts use it for the pixels whose
 // hit triangle is already known (TileTracer's sure hits) when the hit's depth or weights are
-// asked for: the scalar kernel's per-ray set-up and divisions, one pixel at a time, had made
-// Depth cost 1.8x TriangleId alone.
+// asked for: one ray set-up and one set of divisions serve four pixels.
 #pragma once
 
 #include <cstdint>

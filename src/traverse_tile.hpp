@@ -208,8 +208,7 @@ class TileTracer {
     /// Stores the pixels settled by sure hits when the cast asks for their depth or
     /// weights: each pixel's ray is made and tested on its sure hit alone (the only triangle
     /// it can hit first, see test_pixel), four at a time in the lanes of watertight4, or
-    /// with the scalar kernel for a lane it leaves. (Their rays stay in a few registers'
-    /// worth of memory: written into the tile's arrays, they had cost more than the kernel.)
+    /// with the scalar kernel for a lane it leaves.
     template <class Store>
     void store_sure_hits(Store& store) {
 #if defined(__AVX2__)

@@ -1,8 +1,8 @@
 """Output arrays kept from a scene's casts and handed out again once nobody holds them.
 
 A fresh output array costs a page fault per 4 KiB page on its first write: at 1024x1024
-the defaults and a terrain's two point arrays are 77 MB, and their faults took more time
-than the writes themselves (docs/performance.md). A scene keeps the arrays of its last
+the defaults and a terrain's two point arrays are 77 MB, and faulting them in takes longer
+than writing them. A scene keeps the arrays of its last
 two casts (two, so that ``image = scene.cast(camera)`` in a loop, which holds the previous
 image while the next cast runs, finds the one before it free) and reuses an array only
 when the pool's is the last reference to it: no image, view, VTK array or pipeline output
