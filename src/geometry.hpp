@@ -2,9 +2,10 @@
 #pragma once
 
 #include <cmath>
-#include <cstring>
 #include <cstdint>
+#include <cstring>
 #include <limits>
+#include <utility>
 #if defined(__AVX__)
 #include <immintrin.h>
 #endif
@@ -151,6 +152,25 @@ struct Ray {
         std::memcpy(&x, &bits, sizeof x);
         return x;
     }
+};
+
+/// The watertight test's change of axes for a ray (Woop, Benthin and Wald, JCGT 2013): z
+/// along the direction's largest component, x and y the next two in the order that keeps
+/// triangles' winding, and the shear that takes the direction to (0, 0, 1/sz).
+struct Shear {
+    explicit Shear(const Ray& ray) {
+        kz = 0;
+        for (int k = 1; k < 3; ++k)
+            if (std::fabs(ray.dir[k]) > std::fabs(ray.dir[kz])) kz = k;
+        kx = (kz + 1) % 3;
+        ky = (kx + 1) % 3;
+        if (ray.dir[kz] < 0) std::swap(kx, ky);
+        sx = ray.dir[kx] / ray.dir[kz];
+        sy = ray.dir[ky] / ray.dir[kz];
+        sz = 1.0 / ray.dir[kz];
+    }
+    int kx, ky, kz;
+    double sx, sy, sz;
 };
 
 /// The closest hit found so far. `prim` indexes the scene's (BVH-ordered) triangles;

@@ -28,20 +28,18 @@ template <class Real>
 class Watertight : public PointKernel<Watertight<Real>> {
    public:
     Watertight(const Ray& ray, const CastContext& context)
-        : org_(ray.org), dir_(ray.dir), cull_(context.cull_back_faces) {
-        kz_ = 0;
-        for (int k = 1; k < 3; ++k)
-            if (std::fabs(ray.dir[k]) > std::fabs(ray.dir[kz_])) kz_ = k;
-        kx_ = (kz_ + 1) % 3;
-        ky_ = (kx_ + 1) % 3;
-        if (ray.dir[kz_] < 0) std::swap(kx_, ky_);  // keep the winding of the sheared triangle
-        const double sx = ray.dir[kx_] / ray.dir[kz_], sy = ray.dir[ky_] / ray.dir[kz_];
-        sx_ = static_cast<Real>(sx);
-        sy_ = static_cast<Real>(sy);
-        sxd_ = sx;
-        syd_ = sy;
-        sz_ = static_cast<Real>(1.0 / ray.dir[kz_]);
+        : org_(ray.org), dir_(ray.dir), cull_(context.cull_back_faces), shear_(ray) {
+        kx_ = shear_.kx;
+        ky_ = shear_.ky;
+        kz_ = shear_.kz;
+        sx_ = static_cast<Real>(shear_.sx);
+        sy_ = static_cast<Real>(shear_.sy);
+        sxd_ = shear_.sx;
+        syd_ = shear_.sy;
+        sz_ = static_cast<Real>(shear_.sz);
     }
+    /// The ray's axes and shear (what the triangle filter works in too).
+    [[nodiscard]] const Shear& shear() const { return shear_; }
 
     /// Intersects triangle (pa, pb, pc). On a hit with tmin <= t <= tmax returns true and
     /// sets t (in units of the ray direction) and the weights of pa, pb, pc.
@@ -164,6 +162,7 @@ class Watertight : public PointKernel<Watertight<Real>> {
     const double* org_;
     const double* dir_;
     bool cull_;
+    Shear shear_;
     int kx_, ky_, kz_;
     Real sx_, sy_, sz_;
     double sxd_, syd_;

@@ -1,6 +1,7 @@
-// Single-ray traversal of the four-wide BVH (wide_bvh.hpp): the four children's boxes in
-// the lanes of one SSE register, in single precision with bounds that never miss a box the
-// ray enters; rays beyond single precision's reach test the lanes in double instead.
+// Single-ray traversal of the eight-wide BVH (wide_bvh.hpp): the eight children's boxes in
+// the lanes of one AVX register (two SSE registers in the baseline build), in single
+// precision with bounds that never miss a box the ray enters; rays beyond single
+// precision's reach test the lanes in double instead.
 #pragma once
 
 #include <immintrin.h>
@@ -19,7 +20,36 @@
 
 namespace vrc {
 
-/// Slab tests of a wide node's four boxes in float. Conservative as in Ize, "Robust BVH Ray
+/// Float lanes as wide as a node: one AVX register, or two SSE registers in the baseline
+/// build.
+#if defined(__AVX__)
+using Lane8 = __m256;
+[[gnu::always_inline]] inline Lane8 lanes_set(float x) { return _mm256_set1_ps(x); }
+[[gnu::always_inline]] inline Lane8 lanes_load(const float* p) { return _mm256_load_ps(p); }
+[[gnu::always_inline]] inline Lane8 lanes_sub(Lane8 a, Lane8 b) { return _mm256_sub_ps(a, b); }
+[[gnu::always_inline]] inline Lane8 lanes_mul(Lane8 a, Lane8 b) { return _mm256_mul_ps(a, b); }
+[[gnu::always_inline]] inline Lane8 lanes_max(Lane8 a, Lane8 b) { return _mm256_max_ps(a, b); }
+[[gnu::always_inline]] inline Lane8 lanes_min(Lane8 a, Lane8 b) { return _mm256_min_ps(a, b); }
+[[gnu::always_inline]] inline void lanes_store(float* p, Lane8 a) { _mm256_store_ps(p, a); }
+[[gnu::always_inline]] inline unsigned lanes_le(Lane8 a, Lane8 b) { return unsigned(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LE_OQ))); }
+#else
+struct Lane8 {
+    __m128 lo, hi;
+};
+[[gnu::always_inline]] inline Lane8 lanes_set(float x) { return {_mm_set1_ps(x), _mm_set1_ps(x)}; }
+[[gnu::always_inline]] inline Lane8 lanes_load(const float* p) { return {_mm_load_ps(p), _mm_load_ps(p + 4)}; }
+[[gnu::always_inline]] inline Lane8 lanes_sub(Lane8 a, Lane8 b) { return {_mm_sub_ps(a.lo, b.lo), _mm_sub_ps(a.hi, b.hi)}; }
+[[gnu::always_inline]] inline Lane8 lanes_mul(Lane8 a, Lane8 b) { return {_mm_mul_ps(a.lo, b.lo), _mm_mul_ps(a.hi, b.hi)}; }
+[[gnu::always_inline]] inline Lane8 lanes_max(Lane8 a, Lane8 b) { return {_mm_max_ps(a.lo, b.lo), _mm_max_ps(a.hi, b.hi)}; }
+[[gnu::always_inline]] inline Lane8 lanes_min(Lane8 a, Lane8 b) { return {_mm_min_ps(a.lo, b.lo), _mm_min_ps(a.hi, b.hi)}; }
+[[gnu::always_inline]] inline void lanes_store(float* p, Lane8 a) { _mm_store_ps(p, a.lo), _mm_store_ps(p + 4, a.hi); }
+[[gnu::always_inline]] inline unsigned lanes_le(Lane8 a, Lane8 b) {
+    return unsigned(_mm_movemask_ps(_mm_cmple_ps(a.lo, b.lo))) | unsigned(_mm_movemask_ps(_mm_cmple_ps(a.hi, b.hi))) << 4;
+}
+#endif
+static_assert(WideNode::kWidth == 8, "a node's lanes are eight floats");
+
+/// Slab tests of a wide node's boxes in float. Conservative as in Ize, "Robust BVH Ray
 /// Traversal" (JCGT 2013): the origin relative to the anchor is rounded up where that makes
 /// a slab distance smaller and down where larger, so the slab distances (b - o) / d are
 /// computed from exact differences with four roundings (d to float, 1 / d, b - o, the
@@ -42,29 +72,29 @@ class FloatLanes {
             // d > 0: the near slab's distance (lo - o) / d is smallest with o rounded up,
             // the far one's largest with o rounded down; d < 0 the other way round.
             const float up = round_toward(hi, lo, true), down = round_toward(hi, lo, false);
-            org_near_[k] = _mm_set1_ps(negative ? down : up);
-            org_far_[k] = _mm_set1_ps(negative ? up : down);
-            inv_[k] = _mm_set1_ps(1.0f / static_cast<float>(d));
+            org_near_[k] = lanes_set(negative ? down : up);
+            org_far_[k] = lanes_set(negative ? up : down);
+            inv_[k] = lanes_set(1.0f / static_cast<float>(d));
         }
-        tmin_ = _mm_set1_ps(round_down(ray.tmin));
+        tmin_ = lanes_set(round_down(ray.tmin));
         return true;
     }
 
     /// Lanes whose box overlaps [tmin, bound], as bits, and their entry distances (lower
     /// bounds of the exact ones).
-    [[gnu::always_inline]] unsigned test(const WideNode& node, double bound, double enter[4]) const {
-        __m128 t0 = tmin_, t1 = _mm_set1_ps(round_up(bound));
+    [[gnu::always_inline]] unsigned test(const WideNode& node, double bound, double enter[WideNode::kWidth]) const {
+        Lane8 t0 = tmin_, t1 = lanes_set(round_up(bound));
         for (int k = 0; k < 3; ++k) {
-            const __m128 tn = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(node.bounds[near_[k]]), org_near_[k]), inv_[k]);
-            const __m128 tf = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(node.bounds[far_[k]]), org_far_[k]), inv_[k]);
-            t0 = _mm_max_ps(tn, t0);  // (the second operand where either is NaN)
-            t1 = _mm_min_ps(tf, t1);
+            const Lane8 tn = lanes_mul(lanes_sub(lanes_load(node.bounds[near_[k]]), org_near_[k]), inv_[k]);
+            const Lane8 tf = lanes_mul(lanes_sub(lanes_load(node.bounds[far_[k]]), org_far_[k]), inv_[k]);
+            t0 = lanes_max(tn, t0);  // (the second operand where either is NaN)
+            t1 = lanes_min(tf, t1);
         }
-        t1 = _mm_mul_ps(t1, _mm_set1_ps(kWiden));
-        alignas(16) float entry[4];
-        _mm_store_ps(entry, t0);
-        for (int c = 0; c < 4; ++c) enter[c] = entry[c];
-        return unsigned(_mm_movemask_ps(_mm_cmple_ps(t0, t1)));
+        t1 = lanes_mul(t1, lanes_set(kWiden));
+        alignas(32) float entry[WideNode::kWidth];
+        lanes_store(entry, t0);
+        for (int c = 0; c < WideNode::kWidth; ++c) enter[c] = entry[c];
+        return lanes_le(t0, t1);
     }
 
     /// Whether a box entered at `enter` (as test() gave it) lies wholly beyond `bound`.
@@ -81,16 +111,16 @@ class FloatLanes {
         return f;
     }
     int near_[3], far_[3];
-    __m128 org_near_[3], org_far_[3], inv_[3], tmin_;
+    Lane8 org_near_[3], org_far_[3], inv_[3], tmin_;
 };
 
 /// The same slab tests in double, lane by lane (BoxTester): any ray.
 class DoubleLanes {
    public:
     explicit DoubleLanes(const Ray& ray, const double anchor[3]) : boxes_(ray, anchor), tmin_(ray.tmin) {}
-    unsigned test(const WideNode& node, double bound, double enter[4]) const {
+    unsigned test(const WideNode& node, double bound, double enter[WideNode::kWidth]) const {
         unsigned mask = 0;
-        for (int c = 0; c < 4; ++c) {
+        for (int c = 0; c < WideNode::kWidth; ++c) {
             Box box;
             for (int k = 0; k < 3; ++k) {
                 box.lo[k] = node.bounds[k][c];
@@ -123,25 +153,26 @@ template <template <class> class Kernel, class Real, HitPolicy kPolicy, class La
 Hit<Real> wide_hit(const Scene& scene, const Ray& ray, const Kernel<Real>& kernel, const Lanes& lanes, Sink& sink) {
     constexpr bool kFiltered = std::is_same_v<Kernel<Real>, Watertight<Real>>;
     static_assert(kPolicy != HitPolicy::all || kFiltered, "every hit is found with the watertight kernel");
-    struct NoFilter {
-        explicit NoFilter(const Ray&) {}
-    };
-    const std::conditional_t<kFiltered, TriangleFilter, NoFilter> filter(ray);
+    struct NoFilter {};
+    const auto filter = [&] {
+        if constexpr (kFiltered) return TriangleFilter(ray, kernel.shear());
+        else return NoFilter{};
+    }();
     Hit<Real> hit;
     double bound = ray.tmax;
     struct Pending {
         uint32_t child, count;
         double enter;
-    } stack[4 * 128];
+    } stack[WideNode::kWidth * 128];
     int top = 0;
     uint32_t node_index = 0;
     for (;;) {
         const WideNode& node = scene.wide[node_index];
-        double enter[4];
+        double enter[WideNode::kWidth];
         unsigned mask = lanes.test(node, bound, enter);
-        // Push the entered lanes farthest first (a few compares: at most four), so the
-        // nearest is popped first.
-        int order[4], n = 0;
+        // Push the entered lanes farthest first (an insertion sort: most nodes have few
+        // entered lanes), so the nearest is popped first.
+        int order[WideNode::kWidth], n = 0;
         for (; mask; mask &= mask - 1) {
             const int c = __builtin_ctz(mask);
             int at = n++;
@@ -150,7 +181,10 @@ Hit<Real> wide_hit(const Scene& scene, const Ray& ray, const Kernel<Real>& kerne
         }
         for (int i = 0; i < n; ++i) {
             const int c = order[i];
-            if (node.count[c] == 0) __builtin_prefetch(&scene.wide[node.child[c]]);
+            if (node.count[c] == 0) {  // the whole node: its bounds span its four cache lines
+                const char* next = reinterpret_cast<const char*>(&scene.wide[node.child[c]]);
+                for (int line = 0; line < 4; ++line) __builtin_prefetch(next + 64 * line);
+            }
             stack[top++] = {node.child[c], node.count[c], enter[c]};
         }
         for (;;) {  // pop: leaves are tested here, nodes go back to the top of the loop

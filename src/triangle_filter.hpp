@@ -24,19 +24,14 @@ namespace vrc {
 #if defined(__AVX__)
 class TriangleFilter {
    public:
-    explicit TriangleFilter(const Ray& ray) {
-        int kz = 0;
-        for (int k = 1; k < 3; ++k)
-            if (std::fabs(ray.dir[k]) > std::fabs(ray.dir[kz])) kz = k;
-        int kx = (kz + 1) % 3, ky = (kx + 1) % 3;
-        if (ray.dir[kz] < 0) std::swap(kx, ky);  // the kernel's winding
-        axis_[0] = kx;
-        axis_[1] = ky;
-        axis_[2] = kz;
+    TriangleFilter(const Ray& ray, const Shear& shear) {
+        axis_[0] = shear.kx;
+        axis_[1] = shear.ky;
+        axis_[2] = shear.kz;
         for (int k = 0; k < 3; ++k) org_[k] = _mm256_set1_pd(ray.org[k]);
-        sx_ = _mm256_set1_pd(ray.dir[kx] / ray.dir[kz]);
-        sy_ = _mm256_set1_pd(ray.dir[ky] / ray.dir[kz]);
-        sz_ = _mm256_set1_pd(1.0 / ray.dir[kz]);
+        sx_ = _mm256_set1_pd(shear.sx);
+        sy_ = _mm256_set1_pd(shear.sy);
+        sz_ = _mm256_set1_pd(shear.sz);
     }
 
     /// Bits of the lanes among triangles first .. first + n - 1 (n <= 4, leaf order) that
@@ -107,7 +102,7 @@ class TriangleFilter {
 /// Without AVX every triangle of a leaf meets the kernel (the same answers, more tests).
 class TriangleFilter {
    public:
-    explicit TriangleFilter(const Ray&) {}
+    TriangleFilter(const Ray&, const Shear&) {}
     [[nodiscard]] unsigned candidates(const Scene&, uint32_t, uint32_t n, double, double) const {
         return (1u << n) - 1;
     }

@@ -1,4 +1,4 @@
-// Collapse of the binary BVH into four-wide nodes (wide_bvh.hpp).
+// Collapse of the binary BVH into eight-wide nodes (wide_bvh.hpp).
 #include "wide_bvh.hpp"
 
 #include <algorithm>
