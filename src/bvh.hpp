@@ -79,6 +79,10 @@ struct Scene {
     void prefetch_points(uint32_t i) const {
         for (int k = 0; k < 3; ++k) __builtin_prefetch(point(triangles[3 * std::size_t(i) + k]));
     }
+    /// Bytes single rays read: the wide nodes, the triangles and their points.
+    [[nodiscard]] std::size_t ray_bytes() const {
+        return wide.size() * sizeof(WideNode) + triangles.size() * sizeof(uint32_t) + points.size() * sizeof(double);
+    }
     /// Bytes held by the structure and the per-triangle data (points included), and the
     /// working memory kept from camera casts.
     [[nodiscard]] std::size_t memory_bytes() const {

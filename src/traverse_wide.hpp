@@ -9,8 +9,10 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <optional>
 
 #include <type_traits>
+#include <vector>
 
 #include "exact_sign.hpp"
 #include "kernel_watertight.hpp"
@@ -82,8 +84,19 @@ class FloatLanes {
 
     /// Lanes whose box overlaps [tmin, bound], as bits, and their entry distances (lower
     /// bounds of the exact ones).
-    [[gnu::always_inline]] unsigned test(const WideNode& node, double bound, double enter[WideNode::kWidth]) const {
-        Lane8 t0 = tmin_, t1 = lanes_set(round_up(bound));
+    /// Follows the far end of the search, `bound`: boxes beyond it are not entered.
+    void set_bound(double bound) {
+        const float up = round_up(bound);
+        tmax_ = lanes_set(up);
+        // Entry distances are lower bounds of the exact ones up to their four roundings
+        // (2^-21): a box whose entry lies beyond this may be passed over.
+        limit_ = up * (1 + 0x1p-18f);
+    }
+    /// Whether a box entered at `enter` (as test() gave it) lies wholly beyond the bound.
+    [[nodiscard]] bool beyond(float enter) const { return enter > limit_; }
+
+    [[gnu::always_inline]] unsigned test(const WideNode& node, float enter[WideNode::kWidth]) const {
+        Lane8 t0 = tmin_, t1 = tmax_;
         for (int k = 0; k < 3; ++k) {
             const Lane8 tn = lanes_mul(lanes_sub(lanes_load(node.bounds[near_[k]]), org_near_[k]), inv_[k]);
             const Lane8 tf = lanes_mul(lanes_sub(lanes_load(node.bounds[far_[k]]), org_far_[k]), inv_[k]);
@@ -91,14 +104,9 @@ class FloatLanes {
             t1 = lanes_min(tf, t1);
         }
         t1 = lanes_mul(t1, lanes_set(kWiden));
-        alignas(32) float entry[WideNode::kWidth];
-        lanes_store(entry, t0);
-        for (int c = 0; c < WideNode::kWidth; ++c) enter[c] = entry[c];
+        lanes_store(enter, t0);
         return lanes_le(t0, t1);
     }
-
-    /// Whether a box entered at `enter` (as test() gave it) lies wholly beyond `bound`.
-    static bool beyond(double enter, double bound) { return enter > bound * (1 + 0x1p-19); }
 
    private:
     static constexpr float kWiden = 1.0f + 0x1p-20f;
@@ -111,14 +119,21 @@ class FloatLanes {
         return f;
     }
     int near_[3], far_[3];
-    Lane8 org_near_[3], org_far_[3], inv_[3], tmin_;
+    Lane8 org_near_[3], org_far_[3], inv_[3], tmin_, tmax_;
+    float limit_ = 0;
 };
 
-/// The same slab tests in double, lane by lane (BoxTester): any ray.
+/// The same slab tests in double, lane by lane (BoxTester): any ray. Entry distances are
+/// handed on rounded down to float (lower bounds still).
 class DoubleLanes {
    public:
     explicit DoubleLanes(const Ray& ray, const double anchor[3]) : boxes_(ray, anchor), tmin_(ray.tmin) {}
-    unsigned test(const WideNode& node, double bound, double enter[WideNode::kWidth]) const {
+    void set_bound(double bound) {
+        bound_ = bound;
+        limit_ = round_up(bound);
+    }
+    [[nodiscard]] bool beyond(float enter) const { return enter > limit_; }
+    unsigned test(const WideNode& node, float enter[WideNode::kWidth]) const {
         unsigned mask = 0;
         for (int c = 0; c < WideNode::kWidth; ++c) {
             Box box;
@@ -126,16 +141,17 @@ class DoubleLanes {
                 box.lo[k] = node.bounds[k][c];
                 box.hi[k] = node.bounds[3 + k][c];
             }
-            enter[c] = boxes_.enter(box, tmin_, bound);
-            if (enter[c] != std::numeric_limits<double>::infinity()) mask |= 1u << c;
+            const double t = boxes_.enter(box, tmin_, bound_);
+            enter[c] = round_down(t);
+            if (t != std::numeric_limits<double>::infinity()) mask |= 1u << c;
         }
         return mask;
     }
-    static bool beyond(double enter, double bound) { return enter > bound; }
 
    private:
     BoxTester boxes_;
-    double tmin_;
+    double tmin_, bound_ = 0;
+    float limit_ = 0;
 };
 
 /// Where hits go with a policy that keeps none (closest, any).
@@ -144,32 +160,51 @@ struct NoSink {
     void operator()(uint32_t, double, const Real*) const {}
 };
 
-/// Closest hit (or with HitPolicy::any, any hit) along `ray` in [tmin, tmax] through the
-/// wide BVH, children visited nearest first. Ties go to the lowest input triangle index
-/// (test_triangle), so the answer is the binary traversal's, whatever the order. The
-/// watertight kernel meets only the triangles TriangleFilter leaves (its verdicts are that
-/// kernel's); the other strategies meet every triangle, so their own errors stay theirs.
-template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Lanes, class Sink>
-Hit<Real> wide_hit(const Scene& scene, const Ray& ray, const Kernel<Real>& kernel, const Lanes& lanes, Sink& sink) {
-    constexpr bool kFiltered = std::is_same_v<Kernel<Real>, Watertight<Real>>;
+/// Closest hit (or with HitPolicy::any, any hit) along a ray in [tmin, tmax] through the
+/// wide BVH, children visited nearest first, a node at a time (`step`), so that several
+/// rays' searches can take turns and their memory accesses overlap (trace_rays). Ties go
+/// to the lowest input triangle index (test_triangle), so the answer is the binary
+/// traversal's, whatever the order. The watertight kernel meets only the triangles
+/// TriangleFilter leaves (its verdicts are that kernel's); the other strategies meet every
+/// triangle, so their own errors stay theirs. The ray must outlive the search.
+template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Lanes, bool kStaged = false,
+          class Sink = NoSink>
+class WideSearch {
+    static constexpr bool kFiltered = std::is_same_v<Kernel<Real>, Watertight<Real>>;
     static_assert(kPolicy != HitPolicy::all || kFiltered, "every hit is found with the watertight kernel");
     struct NoFilter {};
-    const auto filter = [&] {
-        if constexpr (kFiltered) return TriangleFilter(ray, kernel.shear());
-        else return NoFilter{};
-    }();
-    Hit<Real> hit;
-    double bound = ray.tmax;
-    struct Pending {
-        uint32_t child, count;
-        double enter;
-    } stack[WideNode::kWidth * 128];
-    int top = 0;
-    uint32_t node_index = 0;
-    for (;;) {
-        const WideNode& node = scene.wide[node_index];
-        double enter[WideNode::kWidth];
-        unsigned mask = lanes.test(node, bound, enter);
+    using Filter = std::conditional_t<kFiltered, TriangleFilter, NoFilter>;
+    static Filter filter_for(const Ray& ray, const Kernel<Real>& kernel) {
+        if constexpr (kFiltered)
+            return TriangleFilter(ray, kernel.shear());
+        else
+            return NoFilter{};
+    }
+
+   public:
+    WideSearch(const Scene& scene, const Ray& ray, const CastContext& context, Lanes lanes, Sink* sink = nullptr)
+        : scene_(scene), ray_(ray), kernel_(ray, context), lanes_(lanes), filter_(filter_for(ray, kernel_)), sink_(sink),
+          bound_(ray.tmax) {
+        lanes_.set_bound(bound_);
+    }
+
+    /// Tests the next node, pushing the children the ray enters, then the leaves popped
+    /// before the next node (which is asked for from memory). False when the search is over.
+    bool step() {
+        if constexpr (kStaged) {
+            if (leaf_stage_ == 1) {  // the leaf's point indices are in cache: ask for its points
+                for (uint32_t i = leaf_.child, end = leaf_.child + leaf_.count; i < end; ++i) scene_.prefetch_points(i);
+                leaf_stage_ = 2;
+                return true;
+            }
+            if (leaf_stage_ == 2) {
+                leaf_stage_ = 0;
+                return !leaf(leaf_.child, leaf_.count) && pop();
+            }
+        }
+        const WideNode& node = scene_.wide[node_];
+        alignas(32) float enter[WideNode::kWidth];
+        unsigned mask = lanes_.test(node, enter);
         // Push the entered lanes farthest first (an insertion sort: most nodes have few
         // entered lanes), so the nearest is popped first.
         int order[WideNode::kWidth], n = 0;
@@ -182,55 +217,156 @@ Hit<Real> wide_hit(const Scene& scene, const Ray& ray, const Kernel<Real>& kerne
         for (int i = 0; i < n; ++i) {
             const int c = order[i];
             if (node.count[c] == 0) {  // the whole node: its bounds span its four cache lines
-                const char* next = reinterpret_cast<const char*>(&scene.wide[node.child[c]]);
+                const char* next = reinterpret_cast<const char*>(&scene_.wide[node.child[c]]);
                 for (int line = 0; line < 4; ++line) __builtin_prefetch(next + 64 * line);
             }
-            stack[top++] = {node.child[c], node.count[c], enter[c]};
+            stack_[top_++] = {node.child[c], node.count[c], enter[c]};
         }
-        for (;;) {  // pop: leaves are tested here, nodes go back to the top of the loop
+        return pop();
+    }
+
+    [[nodiscard]] const Hit<Real>& hit() const { return hit_; }
+
+   private:
+    /// Pops the next node the ray may meet before the closest hit so far; the leaves popped
+    /// on the way are tested, or, staged, the first of them is asked for from memory and
+    /// ends the step (the next two steps fetch its points and test it). False when there is
+    /// nothing left to test.
+    bool pop() {
+        for (;;) {
             do {
-                if (top == 0) return hit;
-                --top;
-            } while (Lanes::beyond(stack[top].enter, bound));
-            const Pending& next = stack[top];
+                if (top_ == 0) return false;
+                --top_;
+            } while (lanes_.beyond(stack_[top_].enter));
+            const Pending& next = stack_[top_];
             if (next.count == 0) {
-                node_index = next.child;
-                break;
+                node_ = next.child;
+                return true;
             }
-            if constexpr (kFiltered) {
-                for (uint32_t i = next.child, end = next.child + next.count; i < end; i += 4) {
-                    for (unsigned m = filter.candidates(scene, i, std::min(4u, end - i), ray.tmin, bound); m; m &= m - 1) {
-                        if constexpr (kPolicy == HitPolicy::all) {
-                            double t;
-                            Real b[3];
-                            const uint32_t k = i + __builtin_ctz(m);
-                            if (kernel.test(scene, k, ray.tmin, bound, t, b)) sink(k, t, b);
-                            continue;
-                        }
-                        test_triangle(kernel, scene, i + __builtin_ctz(m), ray.tmin, bound, hit);
-                        if (kPolicy == HitPolicy::any && hit.found()) return hit;
-                    }
-                }
-            } else {
-                for (uint32_t i = next.child, end = next.child + next.count; i < end; ++i) {
-                    test_triangle(kernel, scene, i, ray.tmin, bound, hit);
-                    if (kPolicy == HitPolicy::any && hit.found()) return hit;
-                }
+            if constexpr (kStaged) {
+                leaf_ = next;
+                leaf_stage_ = 1;
+                __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(next.child));
+                __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(next.child + next.count) - 1);
+                return true;
+            } else if (leaf(next.child, next.count)) {
+                return false;
             }
         }
     }
-}
+
+    /// Tests leaf triangles first .. first + count - 1; true when the search is over (any hit).
+    bool leaf(uint32_t first, uint32_t count) {
+        const double before = bound_;
+        const double tmin = ray_.tmin;
+        if constexpr (kFiltered) {
+            for (uint32_t i = first, end = first + count; i < end; i += 4) {
+                for (unsigned m = filter_.candidates(scene_, i, std::min(4u, end - i), tmin, bound_); m; m &= m - 1) {
+                    const uint32_t k = i + __builtin_ctz(m);
+                    if constexpr (kPolicy == HitPolicy::all) {
+                        double t;
+                        Real b[3];
+                        if (kernel_.test(scene_, k, tmin, bound_, t, b)) (*sink_)(k, t, b);
+                        continue;
+                    }
+                    test_triangle(kernel_, scene_, k, tmin, bound_, hit_);
+                    if (kPolicy == HitPolicy::any && hit_.found()) return true;
+                }
+            }
+        } else {
+            for (uint32_t i = first, end = first + count; i < end; ++i) {
+                test_triangle(kernel_, scene_, i, tmin, bound_, hit_);
+                if (kPolicy == HitPolicy::any && hit_.found()) return true;
+            }
+        }
+        if (bound_ != before) lanes_.set_bound(bound_);
+        return false;
+    }
+
+    struct Pending {
+        uint32_t child, count;
+        float enter;
+    };
+    const Scene& scene_;
+    const Ray& ray_;
+    const Kernel<Real> kernel_;
+    Lanes lanes_;
+    const Filter filter_;
+    Sink* sink_;
+    Hit<Real> hit_;
+    double bound_;
+    uint32_t node_ = 0;  // the next node to test: the root first
+    Pending leaf_{};     // the next leaf to test, when leaf_stage_ is not 0
+    int leaf_stage_ = 0;
+    std::size_t top_ = 0;  // (not int: the stack's uint32_t stores could alias it)
+    Pending stack_[WideNode::kWidth * 128];
+};
 
 /// The traversal for one ray: float lanes when its numbers allow, double lanes otherwise.
 /// With HitPolicy::all, `sink(i, t, b)` receives every hit (triangle i in leaf order) and
 /// the returned hit is empty. (Every hit needs the filtered watertight kernel.)
 template <template <class> class Kernel, class Real, HitPolicy kPolicy = HitPolicy::closest, class Sink = NoSink>
 Hit<Real> trace_ray(const Scene& scene, const Ray& ray, const CastContext& context, Sink&& sink = Sink{}) {
+    using S = std::remove_reference_t<Sink>;
     if (scene.wide.empty()) return Hit<Real>{};
-    const Kernel<Real> kernel(ray, context);
     FloatLanes fast;
-    if (fast.setup(ray, scene.anchor)) return wide_hit<Kernel, Real, kPolicy>(scene, ray, kernel, fast, sink);
-    return wide_hit<Kernel, Real, kPolicy>(scene, ray, kernel, DoubleLanes(ray, scene.anchor), sink);
+    if (fast.setup(ray, scene.anchor)) {
+        WideSearch<Kernel, Real, kPolicy, FloatLanes, false, S> search(scene, ray, context, fast, &sink);
+        while (search.step()) {
+        }
+        return search.hit();
+    }
+    WideSearch<Kernel, Real, kPolicy, DoubleLanes, false, S> search(scene, ray, context, DoubleLanes(ray, scene.anchor),
+                                                                      &sink);
+    while (search.step()) {
+    }
+    return search.hit();
+}
+
+/// Closest (or any) hits of rays `which` of `rays`, handed to `store(k, ray, hit)`: up to
+/// kInFlight searches take turns a step at a time, each step ending where the search asks
+/// for memory (a node, a leaf's point indices, its points), so that while one waits the
+/// others compute: single rays through a scene larger than the caches spend most of their
+/// time waiting. The answers are trace_ray's.
+template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Rays, class Store>
+void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vector<std::size_t>& which,
+                            const CastContext& context, Store&& store) {
+    constexpr int kInFlight = 8;
+    using Search = WideSearch<Kernel, Real, kPolicy, FloatLanes, true>;
+    struct Slot {
+        std::size_t k;
+        Ray ray;
+        std::optional<Search> search;
+    };
+    Slot slots[kInFlight];
+    int active = 0;
+    std::size_t next = 0;
+    // Fills a slot with the next ray that float lanes serve (the others are traced at once).
+    auto refill = [&](Slot& slot) {
+        while (next < which.size()) {
+            const std::size_t k = which[next++];
+            slot.ray = rays.ray(k);
+            FloatLanes fast;
+            if (scene.wide.empty() || !fast.setup(slot.ray, scene.anchor)) {
+                store(k, slot.ray, trace_ray<Kernel, Real, kPolicy>(scene, slot.ray, context));
+                continue;
+            }
+            slot.k = k;
+            slot.search.emplace(scene, slot.ray, context, fast);
+            return true;
+        }
+        return false;
+    };
+    for (Slot& slot : slots)
+        if (refill(slot)) ++active;
+    while (active > 0) {
+        for (Slot& slot : slots) {
+            if (!slot.search || slot.search->step()) continue;
+            store(slot.k, slot.ray, slot.search->hit());
+            slot.search.reset();
+            if (!refill(slot)) --active;
+        }
+    }
 }
 
 }  // namespace vrc

@@ -101,3 +101,23 @@ def test_occluded_from_inside_a_closed_mesh_is_always_true():
     directions /= np.linalg.norm(directions, axis=1)[:, None]
     assert scene.occluded(np.zeros(3), directions).all()
     assert not scene.occluded(np.zeros(3), directions, tmax=0.4).any()  # radius 0.5
+
+
+def test_rays_through_a_scene_beyond_the_caches_match_every_triangle_tested():
+    """Scenes this large trace several rays at a time, steps interleaved (render.hpp,
+    trace_rays_interleaved); the answers are still the closest hits the kernel finds when
+    it meets every triangle (accel="none"), bit for bit, for closest and any hit."""
+    scene = vrc.Scene(bumpy_sphere(6))
+    assert scene.n_triangles == 81920 and scene.memory_bytes > 4 << 20  # past the 2 MiB of render.hpp
+    origins, directions = random_rays(400, seed=4)
+    origins[:5] = [[1e19, 0, 0]] * 5  # beyond float's reach of the boxes: traced alone, in double
+    directions[:5] = [[-1, 1e-20, 0], [-1, 0, 0], [-1, 0.1, 0.1], [-1, -0.2, 0.3], [1, 0, 0]]
+    for tmin, tmax in ((0.0, np.inf), (0.5, 2.5)):
+        bvh = scene.intersect(origins, directions, tmin=tmin, tmax=tmax, threads=2)
+        every = scene.intersect(origins, directions, tmin=tmin, tmax=tmax, accel="none", threads=2)
+        assert 0.2 < np.mean(bvh["triangle_id"] >= 0) < 0.95
+        for name in bvh:
+            np.testing.assert_array_equal(bvh[name], every[name], err_msg=name)
+        np.testing.assert_array_equal(
+            scene.occluded(origins, directions, tmin=tmin, tmax=tmax), every["triangle_id"] >= 0
+        )
