@@ -1,7 +1,8 @@
 """The portable builds of the core (CMakeLists.txt, vtkraycast/_core.py): baseline x86-64
 and AVX2 give the same arrays bit for bit, each forced in turn, and the package runs on
 older CPUs: under qemu-user (Debian's qemu-user, as .ci/run installs it) as a Westmere
-(no AVX) it picks the baseline build, as a Haswell the AVX2 one, with the same results."""
+(no AVX) it picks the baseline build, as a Haswell the AVX2 one, with the same results; so
+does a wheel `pip wheel .` builds here, unpacked as it would be installed elsewhere."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import os
 import shutil
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -20,10 +22,14 @@ PROBE = Path(__file__).resolve().parent / "builds" / "probe.py"
 QEMU = shutil.which("qemu-x86_64")
 
 
-def _probe(tmp_path: Path, tag: str, *, core: str | None = None, cpu: str | None = None) -> dict[str, np.ndarray]:
+def _probe(
+    tmp_path: Path, tag: str, *, core: str | None = None, cpu: str | None = None, site: Path | None = None
+) -> dict[str, np.ndarray]:
     out = tmp_path / f"{tag}.npz"
     env = dict(os.environ)
     env.pop("VTKRAYCAST_CORE", None)
+    if site:
+        env["PYTHONPATH"] = os.pathsep.join([str(site), *filter(None, [env.get("PYTHONPATH")])])
     if core:
         env["VTKRAYCAST_CORE"] = core
     command = [sys.executable, str(PROBE), str(out)]
@@ -37,7 +43,7 @@ def _probe(tmp_path: Path, tag: str, *, core: str | None = None, cpu: str | None
 def _assert_same(got: dict, expected: dict, what: str) -> None:
     assert set(got) == set(expected), what
     for name in expected:
-        if name != "core":
+        if name not in ("core", "module"):
             np.testing.assert_array_equal(got[name], expected[name], err_msg=f"{what}: {name}")
 
 
@@ -67,3 +73,27 @@ def test_runs_on_older_cpus(tmp_path, cpu, build):
     emulated = _probe(tmp_path, cpu, cpu=cpu)
     assert str(emulated["core"]) == build
     _assert_same(emulated, _probe(tmp_path, "host"), cpu)
+
+
+@pytest.mark.skipif(QEMU is None, reason="qemu-user is not installed (apt-get install qemu-user; .ci/run does)")
+def test_a_wheel_built_here_runs_without_avx(tmp_path):
+    root = Path(__file__).resolve().parents[1]
+    if not (root / "pyproject.toml").is_file():
+        pytest.skip("not run from a checkout")
+    wheelhouse = tmp_path / "wheelhouse"
+    command = [sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--wheel-dir", str(wheelhouse), str(root)]
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("CMAKE_", "SKBUILD_"))}
+    done = subprocess.run(command, capture_output=True, text=True, timeout=1800, check=False, env=env)
+    assert done.returncode == 0, f"{' '.join(command)}:\n{done.stdout}\n{done.stderr}"
+    (wheel,) = wheelhouse.glob("vtkraycast-*.whl")
+    site = tmp_path / "site"
+    with zipfile.ZipFile(wheel) as archive:
+        archive.extractall(site)
+    assert sorted(p.name.split(".")[0] for p in (site / "vtkraycast").glob("_core_*.so")) == [
+        "_core_avx2",
+        "_core_baseline",
+    ]
+    emulated = _probe(tmp_path, "wheel", cpu="Westmere", site=site)
+    assert str(emulated["core"]) == "baseline"
+    assert Path(str(emulated["module"])).is_relative_to(site)  # the wheel's package, not the installed one
+    _assert_same(emulated, _probe(tmp_path, "host"), "wheel under Westmere")

@@ -52,3 +52,35 @@ def test_bad_arguments_exit_with_a_message(tmp_path):
     assert done.returncode == 2 and "size must be at least 1x1" in done.stderr
     done = run(str(tmp_path / "missing.vtk"), cwd=tmp_path)
     assert done.returncode == 2 and "cannot read" in done.stderr
+
+
+def test_a_terminal_sees_a_progress_bar(tmp_path):
+    """On a terminal (stderr a tty: here a pseudo-terminal) the cast shows tqdm's bar, which
+    ends at 100 %; piped, as in the tests above, nothing but the summary is printed."""
+    import fcntl
+    import os
+    import pty
+    import struct
+    import termios
+
+    leader, follower = pty.openpty()
+    # a terminal 100 columns wide (a fresh pseudo-terminal has none, and tqdm draws nothing)
+    fcntl.ioctl(follower, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
+    command = [sys.executable, "-m", "vtkraycast", "--size", "1200x900"]
+    with subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.PIPE, stderr=follower, text=True) as process:
+        os.close(follower)
+        seen = b""
+        while True:
+            try:
+                chunk = os.read(leader, 4096)
+            except OSError:  # the child closed the terminal
+                break
+            if not chunk:
+                break
+            seen += chunk
+        out = process.stdout.read()
+    os.close(leader)
+    assert process.returncode == 0, seen.decode(errors="replace")
+    assert "hits" in out
+    text = seen.decode(errors="replace")
+    assert "Ray casting" in text and "100%" in text

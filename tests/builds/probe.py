@@ -24,4 +24,4 @@ crossings = scene.intersect_all(origins, directions)
 arrays = {f"image_{k}": image[k] for k in image.array_names}
 arrays |= {f"flat_{k}": flat[k] for k in flat.array_names}
 arrays |= {f"rays_{k}": v for k, v in hits.items()} | {f"all_{k}": v for k, v in crossings.items()}
-np.savez(sys.argv[1], core=_core.name, occluded=scene.occluded(origins, directions), **arrays)
+np.savez(sys.argv[1], core=_core.name, module=vrc.__file__, occluded=scene.occluded(origins, directions), **arrays)
