@@ -52,48 +52,82 @@ inline void keep_crossings(std::vector<RayHit>& hits) {
     });
 }
 
+/// Takes a ray's hits from the traversal (HitPolicy::all) as RayHit records: on an edge
+/// or a vertex, with the feature's point ids and the exact facing that keep_crossings groups
+/// them by.
+struct CrossingSink {
+    const Scene* scene = nullptr;
+    const Ray* ray = nullptr;
+    uint64_t k = 0;
+    std::vector<RayHit> hits;
+
+    void start(std::size_t ray_index, const Ray& r) {
+        k = ray_index;
+        ray = &r;
+        hits.clear();
+    }
+    void operator()(uint32_t i, double t, const double* b) {
+        const uint32_t* tri = scene->triangles.data() + 3 * std::size_t(i);
+        RayHit h{k, scene->prim_ids[i], 0, ray->output(t), {b[0], b[1], b[2]}, {RayHit::kNone, RayHit::kNone}};
+        const int zeros = (b[0] == 0) + (b[1] == 0) + (b[2] == 0);
+        if (zeros == 0) {  // inside the triangle: a crossing of its own
+            hits.push_back(h);
+            return;
+        }
+        if (zeros == 1) {  // an edge: its two points, sorted
+            uint32_t e[2], m = 0;
+            for (int c = 0; c < 3; ++c)
+                if (b[c] != 0) e[m++] = tri[c];
+            h.feature[0] = std::min(e[0], e[1]);
+            h.feature[1] = std::max(e[0], e[1]);
+        } else {  // a vertex
+            for (int c = 0; c < 3; ++c)
+                if (b[c] != 0) h.feature[0] = tri[c];
+        }
+        // The sign of the kernel's det is that of any nonzero edge function of a hit,
+        // each the exact orientation of its edge with the ray.
+        const double *pa = scene->point(tri[0]), *pb = scene->point(tri[1]), *pc = scene->point(tri[2]);
+        const int facing = b[0] != 0   ? exact::orientation(pc, pb, ray->org, ray->dir)
+                           : b[1] != 0 ? exact::orientation(pa, pc, ray->org, ray->dir)
+                                       : exact::orientation(pb, pa, ray->org, ray->dir);
+        h.facing = facing > 0 ? 1 : -1;
+        hits.push_back(h);
+    }
+};
+
 /// The crossings of rays 0 .. n - 1 within [tmin, tmax], each ray's sorted by t:
-/// `each(part, k, hits)` is called once per ray k from worker `part`, which takes the
-/// rays of its slice in order (slices in increasing order of the ray).
+/// `each(part, k, hits)` is called once per ray k from worker `part`, which takes a slice
+/// of the rays (slices in increasing order of the ray; within one, rays in any order: a
+/// scene larger than the caches traces several at a time, trace_rays_interleaved).
 template <class Each>
 void for_each_crossings(const Scene& scene, const ArrayRays& rays, unsigned threads, Each&& each) {
     const std::size_t n = rays.size();
     const unsigned parts = std::max(1u, std::min<unsigned>(threads, unsigned(n / 4096 + 1)));
+    const bool interleave = scene.ray_bytes() >= kInterleavedBytes;
     auto work = [&](unsigned p) {
-        std::vector<RayHit> hits;
-        for (std::size_t k = n * p / parts, end = n * (p + 1) / parts; k < end; ++k) {
+        const std::size_t begin = n * p / parts, end = n * (p + 1) / parts;
+        CrossingSink sinks[kInFlight];
+        for (CrossingSink& sink : sinks) sink.scene = &scene;
+        auto finish = [&](CrossingSink& sink) {
+            keep_crossings(sink.hits);
+            each(p, std::size_t(sink.k), sink.hits);
+        };
+        if (interleave) {
+            std::vector<std::size_t> chunk;
+            for (std::size_t first = begin; first < end; first += ArrayRays::kChunk) {
+                chunk.clear();
+                for (std::size_t k = first; k < std::min(end, first + ArrayRays::kChunk); ++k) chunk.push_back(k);
+                trace_rays_interleaved<Watertight, double, HitPolicy::all>(
+                    scene, rays, chunk, CastContext{},
+                    [&](std::size_t, const Ray&, const Hit<double>&, CrossingSink* sink) { finish(*sink); }, sinks);
+            }
+            return;
+        }
+        for (std::size_t k = begin; k < end; ++k) {
             const Ray ray = rays.ray(k);
-            hits.clear();
-            auto sink = [&](uint32_t i, double t, const double* b) {
-                const uint32_t* tri = scene.triangles.data() + 3 * std::size_t(i);
-                RayHit h{k, scene.prim_ids[i], 0, ray.output(t), {b[0], b[1], b[2]}, {RayHit::kNone, RayHit::kNone}};
-                const int zeros = (b[0] == 0) + (b[1] == 0) + (b[2] == 0);
-                if (zeros == 0) {  // inside the triangle: a crossing of its own
-                    hits.push_back(h);
-                    return;
-                }
-                if (zeros == 1) {  // an edge: its two points, sorted
-                    uint32_t e[2], m = 0;
-                    for (int c = 0; c < 3; ++c)
-                        if (b[c] != 0) e[m++] = tri[c];
-                    h.feature[0] = std::min(e[0], e[1]);
-                    h.feature[1] = std::max(e[0], e[1]);
-                } else {  // a vertex
-                    for (int c = 0; c < 3; ++c)
-                        if (b[c] != 0) h.feature[0] = tri[c];
-                }
-                // The sign of the kernel's det is that of any nonzero edge function of a hit,
-                // each the exact orientation of its edge with the ray.
-                const double *pa = scene.point(tri[0]), *pb = scene.point(tri[1]), *pc = scene.point(tri[2]);
-                const int facing = b[0] != 0   ? exact::orientation(pc, pb, ray.org, ray.dir)
-                                   : b[1] != 0 ? exact::orientation(pa, pc, ray.org, ray.dir)
-                                               : exact::orientation(pb, pa, ray.org, ray.dir);
-                h.facing = facing > 0 ? 1 : -1;
-                hits.push_back(h);
-            };
-            trace_ray<Watertight, double, HitPolicy::all>(scene, ray, CastContext{}, sink);
-            keep_crossings(hits);
-            each(p, k, hits);
+            sinks[0].start(k, ray);
+            trace_ray<Watertight, double, HitPolicy::all>(scene, ray, CastContext{}, sinks[0]);
+            finish(sinks[0]);
         }
     };
     std::vector<std::thread> workers;

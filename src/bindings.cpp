@@ -408,6 +408,8 @@ VRC_NB_MODULE(VRC_MODULE, m) {
             }
             std::vector<vrc::RayHit> hits;  // (the parts are slices of the rays, in order)
             for (auto& part : parts) hits.insert(hits.end(), part.begin(), part.end());
+            // (a slice's rays may finish in any order; each ray's crossings stay together, by t)
+            std::stable_sort(hits.begin(), hits.end(), [](const vrc::RayHit& x, const vrc::RayHit& y) { return x.ray < y.ray; });
             const std::size_t m = hits.size();
             auto* ray = new int64_t[m];
             auto* triangle = new int64_t[m];

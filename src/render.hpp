@@ -101,13 +101,6 @@ struct CameraCast {
     Barrier barrier;
 };
 
-/// Scenes whose single-ray data (wide nodes, triangles, points) take this much memory or
-/// more are traced several rays at a time (trace_rays_interleaved): beyond the caches
-/// their rays wait for memory at every node. One thread, alternated with the ray-at-a-time
-/// path on random rays: 0.6x the time on 330 k triangles (22 MB) and the frog, 0.9x on
-/// 80 k (5 MB), 1.2x on 20 k (0.7 MB).
-constexpr std::size_t kInterleavedBytes = std::size_t(2) << 20;
-
 /// Casts every ray of `rays`, tiles shared among `threads` workers, through the BVH (or,
 /// with kBruteForce, the seed's sphere-box-every-triangle method), optionally skipping
 /// triangles that face away from the ray. Returns false when
@@ -136,7 +129,7 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         if (may_hit && interleave) {
             std::vector<std::size_t> tile_rays;
             rays.for_each_in_tile(tile, [&](std::size_t k) { tile_rays.push_back(k); });
-            const auto take = [&](std::size_t k, const Ray& ray, const Hit<Real>& hit) { store(k, ray, hit); };
+            const auto take = [&](std::size_t k, const Ray& ray, const Hit<Real>& hit, NoSink*) { store(k, ray, hit); };
             if (context.any_hit)
                 trace_rays_interleaved<Kernel, Real, HitPolicy::any>(scene, rays, tile_rays, context, take);
             else

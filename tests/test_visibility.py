@@ -62,9 +62,10 @@ def test_crossings_carry_their_triangle_cell_and_weights():
     np.testing.assert_array_equal(scene.count_intersections(origins, directions) % 2 == 1, inside)
 
 
-def test_counts_agree_with_open3d():
+@pytest.mark.parametrize("level", [4, 6])  # 6: beyond the caches, rays traced eight at a time
+def test_counts_agree_with_open3d(level):
     o3d = pytest.importorskip("open3d")
-    mesh = bumpy_sphere(4)
+    mesh = bumpy_sphere(level)
     scene = vrc.Scene(mesh)
     rng = np.random.default_rng(5)
     origins = rng.uniform(-2, 2, (20000, 3))
@@ -75,6 +76,16 @@ def test_counts_agree_with_open3d():
                        o3d.core.Tensor(scene.prepared.triangles.astype(np.uint32)))  # fmt: skip
     theirs = peer.count_intersections(o3d.core.Tensor(np.hstack((origins, directions)).astype(np.float32))).numpy()
     assert (ours == theirs).mean() > 0.999  # (Open3D rounds rays and points to float32)
+    # every crossing listed, ray by ray and by t; the first is the closest hit that testing
+    # every triangle finds
+    crossings = scene.intersect_all(origins, directions)
+    np.testing.assert_array_equal(np.diff(crossings["ray_splits"]), ours)
+    assert (np.diff(crossings["ray_ids"]) >= 0).all()
+    same_ray = np.diff(crossings["ray_ids"]) == 0
+    assert (np.diff(crossings["t"])[same_ray] >= 0).all()
+    first = crossings["ray_splits"][:-1][ours > 0]
+    closest = scene.intersect(origins[ours > 0][:300], directions[ours > 0][:300], accel="none", arrays="t")["t"]
+    np.testing.assert_array_equal(crossings["t"][first[:300]], closest)
 
 
 @pytest.mark.parametrize("flip", [False, True])
