@@ -112,22 +112,22 @@ void for_each_crossings(const Scene& scene, const ArrayRays& rays, unsigned thre
             keep_crossings(sink.hits);
             each(p, std::size_t(sink.k), sink.hits);
         };
-        if (interleave) {
-            std::vector<std::size_t> chunk;
-            for (std::size_t first = begin; first < end; first += ArrayRays::kChunk) {
-                chunk.clear();
-                for (std::size_t k = first; k < std::min(end, first + ArrayRays::kChunk); ++k) chunk.push_back(k);
+        std::vector<std::size_t> chunk;
+        for (std::size_t first = begin; first < end; first += ArrayRays::kChunk) {
+            chunk.clear();
+            for (std::size_t k = first; k < std::min(end, first + ArrayRays::kChunk); ++k) chunk.push_back(k);
+            if (interleave && !coherent(scene, rays, chunk)) {
                 trace_rays_interleaved<Watertight, double, HitPolicy::all>(
                     scene, rays, chunk, CastContext{},
                     [&](std::size_t, const Ray&, const Hit<double>&, CrossingSink* sink) { finish(*sink); }, sinks);
+                continue;
             }
-            return;
-        }
-        for (std::size_t k = begin; k < end; ++k) {
-            const Ray ray = rays.ray(k);
-            sinks[0].start(k, ray);
-            trace_ray<Watertight, double, HitPolicy::all>(scene, ray, CastContext{}, sinks[0]);
-            finish(sinks[0]);
+            for (const std::size_t k : chunk) {
+                const Ray ray = rays.ray(k);
+                sinks[0].start(k, ray);
+                trace_ray<Watertight, double, HitPolicy::all>(scene, ray, CastContext{}, sinks[0]);
+                finish(sinks[0]);
+            }
         }
     };
     std::vector<std::thread> workers;

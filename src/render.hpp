@@ -126,9 +126,9 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         // The seed's bounding test, a whole tile at a time: tiles that cannot see the
         // scene are misses without a single ray made.
         const bool may_hit = rays.tile_may_hit(tile);
-        if (may_hit && interleave) {
-            std::vector<std::size_t> tile_rays;
-            rays.for_each_in_tile(tile, [&](std::size_t k) { tile_rays.push_back(k); });
+        std::vector<std::size_t> tile_rays;
+        if (may_hit && interleave) rays.for_each_in_tile(tile, [&](std::size_t k) { tile_rays.push_back(k); });
+        if (may_hit && interleave && !coherent(scene, rays, tile_rays)) {
             const auto take = [&](std::size_t k, const Ray& ray, const Hit<Real>& hit, NoSink*) { store(k, ray, hit); };
             if (context.any_hit)
                 trace_rays_interleaved<Kernel, Real, HitPolicy::any>(scene, rays, tile_rays, context, take);

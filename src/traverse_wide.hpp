@@ -330,6 +330,32 @@ Hit<Real> trace_ray(const Scene& scene, const Ray& ray, const CastContext& conte
 /// 80 k (5 MB), 1.2x on 20 k (0.7 MB).
 constexpr std::size_t kInterleavedBytes = std::size_t(2) << 20;
 
+/// Whether rays `which` of `rays` follow one another closely (a lidar's sweep, an image's
+/// rows): consecutive rays' origins within a sixteenth of the scene's size and directions
+/// within a sixteenth of a radian, on average. Such rays find the scene in the caches one
+/// after another, and interleaving them only costs: on the frog, a 64 x 2048 lidar scan
+/// takes 1.2x the time interleaved.
+template <class Rays>
+bool coherent(const Scene& scene, const Rays& rays, const std::vector<std::size_t>& which) {
+    if (which.size() < 2) return true;
+    double size = 0;
+    for (int k = 0; k < 3; ++k) size = std::max(size, double(scene.bounds.hi[k]) - double(scene.bounds.lo[k]));
+    double spread = 0;
+    Ray last = rays.ray(which[0]);
+    for (std::size_t i = 1; i < which.size(); ++i) {
+        const Ray ray = rays.ray(which[i]);
+        double moved = 0, turned = 0;
+        const double a = std::sqrt(dot(ray.dir, ray.dir)), b = std::sqrt(dot(last.dir, last.dir));
+        for (int k = 0; k < 3; ++k) {
+            moved += std::fabs(ray.org[k] - last.org[k]);
+            turned += std::fabs(ray.dir[k] / a - last.dir[k] / b);
+        }
+        spread += (size > 0 ? moved / size : 0) + turned;
+        last = ray;
+    }
+    return spread < double(which.size() - 1) / 16;
+}
+
 /// Closest (or any) hits of rays `which` of `rays`, handed to `store(k, ray, hit)`: up to
 /// kInFlight searches take turns a step at a time, each step ending where the search asks
 /// for memory (a node, a leaf's point indices, its points), so that while one waits the
