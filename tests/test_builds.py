@@ -76,7 +76,7 @@ def test_runs_on_older_cpus(tmp_path, cpu, build):
 
 
 @pytest.mark.skipif(QEMU is None, reason="qemu-user is not installed (apt-get install qemu-user; .ci/run does)")
-def test_a_wheel_built_here_runs_without_avx(tmp_path):
+def test_a_wheel_built_here_runs_on_older_cpus(tmp_path):
     root = Path(__file__).resolve().parents[1]
     if not (root / "pyproject.toml").is_file():
         pytest.skip("not run from a checkout")
@@ -93,7 +93,9 @@ def test_a_wheel_built_here_runs_without_avx(tmp_path):
         "_core_avx2",
         "_core_baseline",
     ]
-    emulated = _probe(tmp_path, "wheel", cpu="Westmere", site=site)
-    assert str(emulated["core"]) == "baseline"
-    assert Path(str(emulated["module"])).is_relative_to(site)  # the wheel's package, not the installed one
-    _assert_same(emulated, _probe(tmp_path, "host"), "wheel under Westmere")
+    host = _probe(tmp_path, "host")
+    for cpu, build in (("Westmere", "baseline"), ("Haswell", "avx2")):
+        emulated = _probe(tmp_path, f"wheel-{cpu}", cpu=cpu, site=site)
+        assert str(emulated["core"]) == build
+        assert Path(str(emulated["module"])).is_relative_to(site)  # the wheel's package, not the installed one
+        _assert_same(emulated, host, f"wheel under {cpu}")
