@@ -166,7 +166,9 @@ struct NoSink {
 /// to the lowest input triangle index (test_triangle), so the answer is the binary
 /// traversal's, whatever the order. The watertight kernel meets only the triangles
 /// TriangleFilter leaves (its verdicts are that kernel's); the other strategies meet every
-/// triangle, so their own errors stay theirs. The ray must outlive the search.
+/// triangle, so their own errors stay theirs. The ray must outlive the search. Staged
+/// (kStaged), a leaf takes three steps, as interleaved searches want: its point indices
+/// asked for, then its points, then its test.
 template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Lanes, bool kStaged = false,
           class Sink = NoSink>
 class WideSearch {
@@ -188,8 +190,8 @@ class WideSearch {
         lanes_.set_bound(bound_);
     }
 
-    /// Tests the next node, pushing the children the ray enters, then the leaves popped
-    /// before the next node (which is asked for from memory). False when the search is over.
+    /// Tests the next node, pushing the children the ray enters, then pops (pop()); staged,
+    /// a step may instead be one of a leaf's. False when the search is over.
     bool step() {
         if constexpr (kStaged) {
             if (leaf_stage_ == 1) {  // the leaf's point indices are in cache: ask for its points
@@ -299,7 +301,7 @@ class WideSearch {
     Pending leaf_{};     // the next leaf to test, when leaf_stage_ is not 0
     int leaf_stage_ = 0;
     std::size_t top_ = 0;  // (not int: the stack's uint32_t stores could alias it)
-    Pending stack_[WideNode::kWidth * 128];
+    Pending stack_[WideNode::kWidth * 128];  // (at most seven pushed per level, under 96 levels)
 };
 
 /// The traversal for one ray: float lanes when its numbers allow, double lanes otherwise.
