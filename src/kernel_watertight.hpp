@@ -28,16 +28,13 @@ template <class Real>
 class Watertight : public PointKernel<Watertight<Real>> {
    public:
     Watertight(const Ray& ray, const CastContext& context)
-        : org_(ray.org), dir_(ray.dir), cull_(context.cull_back_faces), shear_(ray) {
-        kx_ = shear_.kx;
-        ky_ = shear_.ky;
-        kz_ = shear_.kz;
-        sx_ = static_cast<Real>(shear_.sx);
-        sy_ = static_cast<Real>(shear_.sy);
-        sxd_ = shear_.sx;
-        syd_ = shear_.sy;
-        sz_ = static_cast<Real>(shear_.sz);
-    }
+        : org_(ray.org),
+          dir_(ray.dir),
+          cull_(context.cull_back_faces),
+          shear_(ray),
+          sx_(static_cast<Real>(shear_.sx)),
+          sy_(static_cast<Real>(shear_.sy)),
+          sz_(static_cast<Real>(shear_.sz)) {}
     /// The ray's axes and shear (what the triangle filter works in too).
     [[nodiscard]] const Shear& shear() const { return shear_; }
 
@@ -52,15 +49,16 @@ class Watertight : public PointKernel<Watertight<Real>> {
             bb[k] = static_cast<Real>(pb[k] - org_[k]);
             c[k] = static_cast<Real>(pc[k] - org_[k]);
         }
-        const Real ax = a[kx_] - sx_ * a[kz_], ay = a[ky_] - sy_ * a[kz_];
-        const Real bx = bb[kx_] - sx_ * bb[kz_], by = bb[ky_] - sy_ * bb[kz_];
-        const Real cx = c[kx_] - sx_ * c[kz_], cy = c[ky_] - sy_ * c[kz_];
+        const int kx = shear_.kx, ky = shear_.ky, kz = shear_.kz;
+        const Real ax = a[kx] - sx_ * a[kz], ay = a[ky] - sy_ * a[kz];
+        const Real bx = bb[kx] - sx_ * bb[kz], by = bb[ky] - sy_ * bb[kz];
+        const Real cx = c[kx] - sx_ * c[kz], cy = c[ky] - sy_ * c[kz];
         Real u = cx * by - cy * bx;
         Real v = ax * cy - ay * cx;
         Real w = bx * ay - by * ax;
         // Magnitudes of the sheared coordinates, for the error bounds of the edge functions.
-        const Real mx[3] = {magnitude(a, kx_, sx_), magnitude(bb, kx_, sx_), magnitude(c, kx_, sx_)};
-        const Real my[3] = {magnitude(a, ky_, sy_), magnitude(bb, ky_, sy_), magnitude(c, ky_, sy_)};
+        const Real mx[3] = {magnitude(a, kx, sx_), magnitude(bb, kx, sx_), magnitude(c, kx, sx_)};
+        const Real my[3] = {magnitude(a, ky, sy_), magnitude(bb, ky, sy_), magnitude(c, ky, sy_)};
         bool snapped = false;  // an edge function kept its exact sign but not its size
         u = exact_if_close(u, mx[2] * my[1] + my[2] * mx[1], pc, pb, snapped);
         v = exact_if_close(v, mx[0] * my[2] + my[0] * mx[2], pa, pc, snapped);
@@ -68,7 +66,7 @@ class Watertight : public PointKernel<Watertight<Real>> {
         if ((u < 0 || v < 0 || w < 0) && (u > 0 || v > 0 || w > 0)) return false;
         const Real det = u + v + w;  // > 0 when the triangle faces the ray origin
         if (det == 0 || (cull_ && det < 0)) return false;
-        const Real az = sz_ * a[kz_], bz = sz_ * bb[kz_], cz = sz_ * c[kz_];
+        const Real az = sz_ * a[kz], bz = sz_ * bb[kz], cz = sz_ * c[kz];
         const Real tu = u * az, tv = v * bz, tw = w * cz;
         double tt = static_cast<double>((tu + tv + tw) / det);
         // Rounding bound on tt: it grows as the terms cancel (a surface through the origin).
@@ -120,7 +118,7 @@ class Watertight : public PointKernel<Watertight<Real>> {
 
     /// |p_k| + |s p_z|: bounds the sheared coordinate p_k - s p_z and scales its error.
     [[nodiscard]] Real magnitude(const Real p[3], int k, Real s) const {
-        return std::fabs(p[k]) + std::fabs(s * p[kz_]);
+        return std::fabs(p[k]) + std::fabs(s * p[shear_.kz]);
     }
 
     /// The edge function `e` of (p, q), or, when |e| is within its rounding-error bound,
@@ -149,11 +147,13 @@ class Watertight : public PointKernel<Watertight<Real>> {
                 pd[k] = p[k] - org_[k];
                 qd[k] = q[k] - org_[k];
             }
-            const double px = pd[kx_] - sxd_ * pd[kz_], py = pd[ky_] - syd_ * pd[kz_];
-            const double qx = qd[kx_] - sxd_ * qd[kz_], qy = qd[ky_] - syd_ * qd[kz_];
+            const int kx = shear_.kx, ky = shear_.ky, kz = shear_.kz;
+            const double sxd = shear_.sx, syd = shear_.sy;
+            const double px = pd[kx] - sxd * pd[kz], py = pd[ky] - syd * pd[kz];
+            const double qx = qd[kx] - sxd * qd[kz], qy = qd[ky] - syd * qd[kz];
             const double e = px * qy - py * qx;
-            const double scale = (std::fabs(pd[kx_]) + std::fabs(sxd_ * pd[kz_])) * (std::fabs(qd[ky_]) + std::fabs(syd_ * qd[kz_])) +
-                                 (std::fabs(pd[ky_]) + std::fabs(syd_ * pd[kz_])) * (std::fabs(qd[kx_]) + std::fabs(sxd_ * qd[kz_]));
+            const double scale = (std::fabs(pd[kx]) + std::fabs(sxd * pd[kz])) * (std::fabs(qd[ky]) + std::fabs(syd * qd[kz])) +
+                                 (std::fabs(pd[ky]) + std::fabs(syd * pd[kz])) * (std::fabs(qd[kx]) + std::fabs(sxd * qd[kz]));
             if (std::fabs(e) > 32 * (std::numeric_limits<double>::epsilon() / 2) * scale) return (e > 0) - (e < 0);
         }
         return exact::orientation(p, q, org_, dir_);
@@ -163,9 +163,7 @@ class Watertight : public PointKernel<Watertight<Real>> {
     const double* dir_;
     bool cull_;
     Shear shear_;
-    int kx_, ky_, kz_;
-    Real sx_, sy_, sz_;
-    double sxd_, syd_;
+    Real sx_, sy_, sz_;  // shear_'s in the kernel's precision
 };
 
 }  // namespace vrc
