@@ -291,6 +291,8 @@ bool cast(const vrc::Scene& scene, const Request& q) {
 
 }  // namespace
 
+void bind_compositing(nb::module_& m);  // compositing_bindings.cpp
+
 // One source, a module per instruction set (CMakeLists.txt): VRC_MODULE names it.
 #define VRC_NB_MODULE(name, variable) NB_MODULE(name, variable)
 VRC_NB_MODULE(VRC_MODULE, m) {
@@ -445,6 +447,7 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         "cpu_supports_avx2",
         [] { return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"); },
         "Whether this CPU runs the AVX2 build of the core (AVX2 and FMA).");
+    bind_compositing(m);
     m.def("cast", &cast, "scene"_a, "request"_a,
           "Casts a request's rays (released GIL, all outputs written by the workers). Returns False if aborted.");
 }

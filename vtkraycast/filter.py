@@ -247,16 +247,10 @@ class RayCastFilter(VTKPythonAlgorithmBase):
     def _cast_block(self, output: vtkImageData, info: Any, data: vtkDataObject) -> None:
         """The collective cast under MPI; this rank's output is the block of rows and
         columns the pipeline asks of it (its update extent)."""
-        camera, arrays = self._scene._cast_parallel(self._view(data), root=None, **self._options())
         x0, x1, y0, y1 = info.Get(vtkStreamingDemandDrivenPipeline.UPDATE_EXTENT())[:4]
+        camera, block = self._scene._cast_parallel(self._view(data), root=None, extent=(x0, x1, y0, y1), **self._options())
         fill_image(output, camera, {}, world_space=self._world_space)
         output.SetExtent(x0, x1, y0, y1, 0, 0)
-        block = {
-            name: values.reshape(camera.ny, camera.nx, -1)[y0 : y1 + 1, x0 : x1 + 1].reshape(
-                (y1 - y0 + 1) * (x1 - x0 + 1), *values.shape[1:]
-            )
-            for name, values in arrays.items()
-        }
         set_arrays(output, block)
 
     def _progress(self, done: int, total: int) -> bool:

@@ -16,16 +16,27 @@ Communicators are mpi4py's (``MPI.Comm``); :class:`VtkController` adapts VTK's
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from . import _core
 from .fields import miss_value
 
-__all__ = ["Mpi4pyComm", "VtkController", "communicator", "composite", "default_threads", "triangle_keys"]
+#: Where received bytes go: (bytes, np.uint8) -> a uint8 array of that length.
+Room = Callable[[int, type], np.ndarray]
 
-#: Key of a miss: above every triangle's.
-NO_HIT = np.iinfo(np.int64).max
+__all__ = [
+    "Mpi4pyComm",
+    "VtkController",
+    "Workspace",
+    "communicator",
+    "composite",
+    "default_threads",
+    "triangle_keys",
+]
+
 #: Triangles of one cell get consecutive keys below this many (a polygon of 2**16 points is
 #: beyond any mesh seen; checked).
 _PER_CELL = 2**16
@@ -78,18 +89,36 @@ class VtkController:
         self._controller.Broadcast(message, root)
         return value if self.rank == root else _unpickled(message)
 
-    def broadcast(self, values: np.ndarray, root: int) -> np.ndarray:
+    def alltoallv(self, send: np.ndarray, counts: np.ndarray, room: Room = np.empty) -> tuple[np.ndarray, np.ndarray]:
+        """Bytes ``send[segment r]`` (segments of ``counts`` bytes, in rank order) to each
+        rank r; returns what every rank sent here (in ``room(bytes)``), in rank order, and
+        the sizes. VTK's
+        controllers have no all-to-all: blocking sends and receives, one pair at a time in
+        the same order on every rank (so none waits on a rank waiting on it)."""
         from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+        from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
 
-        flat = np.ascontiguousarray(values.reshape(len(values), -1))
-        message = numpy_to_vtk(flat, deep=True)
-        if self.rank != root:
-            message = message.NewInstance()
-        self._controller.Broadcast(message, root)
-        return vtk_to_numpy(message).reshape(values.shape).astype(values.dtype, copy=False)
+        size, rank = self.size, self.rank
+        matrix = np.zeros((size, size), dtype=np.int64)  # (bytes from row rank to column rank)
+        matrix[rank] = counts
+        matrix = self.allreduce(matrix, "sum")
+        sends, receives = _offsets(counts), _offsets(matrix[:, rank])
+        out = room(int(receives[-1]), np.uint8)
+        out[receives[rank] : receives[rank + 1]] = send[sends[rank] : sends[rank + 1]]
+        for source in range(size):
+            for target in range(size):
+                if source == target or matrix[source, target] == 0 or rank not in (source, target):
+                    continue
+                if rank == source:
+                    self._controller.Send(numpy_to_vtk(send[sends[target] : sends[target + 1]]), target, _TAG)
+                else:
+                    message = vtkUnsignedCharArray()
+                    self._controller.Receive(message, source, _TAG)
+                    out[receives[source] : receives[source + 1]] = vtk_to_numpy(message)
+        return out, matrix[:, rank].copy()
 
 
-_TAG = 827  # (message tag of the winners' arrays, on VTK's controller)
+_TAG = 827  # (the tag of compositing's point-to-point messages)
 
 
 def _pickled(value: Any) -> Any:
@@ -132,10 +161,34 @@ class Mpi4pyComm:
     def gather_object(self, value: Any, root: int | None = None) -> list[Any] | None:
         return self._comm.allgather(value) if root is None else self._comm.gather(value, root=root)
 
-    def broadcast(self, values: np.ndarray, root: int) -> np.ndarray:
-        values = np.ascontiguousarray(values)
-        self._comm.Bcast(values, root=root)
-        return values
+    def alltoallv(self, send: np.ndarray, counts: np.ndarray, room: Room = np.empty) -> tuple[np.ndarray, np.ndarray]:
+        """Bytes ``send[segment r]`` (segments of ``counts`` bytes, in rank order) to each
+        rank r; returns what every rank sent here (in ``room(bytes)``), in rank order, and
+        the sizes."""
+        MPI = self._mpi
+        received = np.empty(self.size, dtype=np.int64)
+        self._comm.Alltoall(np.ascontiguousarray(counts, dtype=np.int64), received)
+        sends, receives = _offsets(counts), _offsets(received)
+        out = room(int(receives[-1]), np.uint8)
+        # MPI's counts and displacements are C ints: beyond 2 GiB, messages in pieces
+        # (in order: MPI keeps the order of messages between two ranks with one tag).
+        small = self._comm.allreduce(max(int(sends[-1]), int(receives[-1])), op=MPI.MAX) < 2**31
+        if small:
+            self._comm.Alltoallv([send, (counts, sends[:-1]), MPI.BYTE], [out, (received, receives[:-1]), MPI.BYTE])
+            return out, received
+        piece = 2**30
+        requests = []
+        for other in range(self.size):
+            incoming = out[receives[other] : receives[other + 1]]
+            outgoing = send[sends[other] : sends[other + 1]]
+            requests += [self._comm.Irecv([incoming[a : a + piece], MPI.BYTE], other, _TAG) for a in range(0, len(incoming), piece)]
+            requests += [self._comm.Isend([outgoing[a : a + piece], MPI.BYTE], other, _TAG) for a in range(0, len(outgoing), piece)]
+        MPI.Request.Waitall(requests)
+        return out, received
+
+
+def _offsets(counts: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
 
 
 def communicator(comm: Any) -> VtkController | Mpi4pyComm:
@@ -174,49 +227,110 @@ def triangle_keys(cell_ids: np.ndarray, global_ids: np.ndarray | None, rank: int
     return global_ids[cell_ids].astype(np.int64) * _PER_CELL + within
 
 
+class Workspace:
+    """Byte buffers a scene's collective casts use again and again, by role, grown as
+    needed: a fresh buffer costs a page fault per 4 KiB on its first write, as much as the
+    compositing passes themselves. Collective casts on one scene run one at a time (MPI
+    orders a communicator's collective calls), so the roles never overlap."""
+
+    def __init__(self) -> None:
+        self._buffers: dict[str, np.ndarray] = {}
+
+    def room(self, role: str) -> Room:
+        """``room(bytes, np.uint8)``: the role's buffer, ``bytes`` long."""
+
+        def take(nbytes: int, dtype: type = np.uint8) -> np.ndarray:
+            kept = self._buffers.get(role)
+            if kept is None or len(kept) < nbytes:
+                kept = self._buffers[role] = np.empty(max(nbytes, 1) + nbytes // 4, np.uint8)
+            return kept[:nbytes]
+
+        return take
+
+
+def frame_regions(regions: list[tuple[int, int, int, int] | None]) -> np.ndarray:
+    """Rows (x0, x1, y0, y1) for :func:`composite`, an empty one (x0 > x1) where a rank
+    receives nothing."""
+    return np.array([(0, -1, 0, -1) if r is None else r for r in regions], dtype=np.int64).reshape(-1, 4)
+
+
 def composite(
     comm: VtkController | Mpi4pyComm,
     buffers: dict[str, np.ndarray],
-    hit_keys: np.ndarray,
+    keys: np.ndarray,
     layout: dict[str, tuple[np.dtype, tuple[int, ...]]],
-    root: int | None,
+    shape: tuple[int, int],
+    regions: list[tuple[int, int, int, int] | None],
     tie: float,
+    work: Workspace,
 ) -> dict[str, np.ndarray] | None:
-    """The image of every rank's hits: ``buffers`` (this rank's arrays, Depth among them;
-    an array a rank lacks counts as missing there), ``hit_keys`` (this rank's key of each
-    pixel's hit, NO_HIT on a miss), ``layout`` (dtype and row shape of every array, agreed
-    by all ranks). Returns the arrays on ``root`` (every rank when None), None elsewhere.
+    """This rank's region of the image of every rank's hits.
 
-    Two reductions over the frame pick each pixel's winner (the least depth, then the
-    lowest key within the tie tolerance); then only the winners' values travel, each rank
-    sending its own to the root."""
-    target = 0 if root is None else root
-    hit = hit_keys != NO_HIT
-    depth = np.where(hit, buffers["Depth"], np.inf).astype(np.float64, copy=False)
-    nearest = comm.allreduce(depth, "min")
-    candidate = hit & (depth <= nearest + tie * np.abs(nearest))
-    winner = comm.allreduce(np.where(candidate, hit_keys, NO_HIT), "min")
-    won = np.flatnonzero(candidate & (hit_keys == winner))
-    sent = (won, {name: buffers[name][won] for name in layout if name in buffers})
-    received = comm.gather_object(None if comm.rank == target else sent, target)
+    ``buffers``: this rank's full-frame arrays (TriangleId, Depth and vtkValidPointMask
+    among them; an array a rank lacks counts as missing there); ``keys``: the global key of
+    each of its triangles; ``layout``: dtype and row shape of every output array, agreed by
+    all ranks; ``shape``: the frame (ny, nx); ``regions``: per rank the columns and rows
+    (x0, x1, y0, y1, inclusive) it receives, None for nothing; ``work``: the scene's
+    buffers. Returns this rank's region's arrays (None when it receives nothing).
+
+    Each rank decides the pixels of one block of the frame: the others send it their hits
+    there (pixel, depth, key), it flags each won or lost and sends the flags back; each
+    rank then sends its winners' rows to the ranks whose regions hold them. Only hits
+    travel, so the bytes moved follow the covered pixels, not the frame."""
+    ny, nx = shape
+    pixels, size, rank = nx * ny, comm.size, comm.rank
+    for region in regions:
+        if region is not None and region[0] <= region[1] and region[2] <= region[3]:
+            if region[0] < 0 or region[1] >= nx or region[2] < 0 or region[3] >= ny:
+                raise ValueError(f"the region {region} reaches beyond the {nx}x{ny} image")
+    starts = np.array([pixels * b // size for b in range(size + 1)], dtype=np.int64)
+    record = 20  # (bytes per record: offset, depth, key; src/compositing.hpp)
+    hit = buffers["vtkValidPointMask"].view(np.uint8)
+    counts = _core.composite_records(
+        hit, buffers["TriangleId"], buffers["Depth"], keys, starts, work.room("records")(record * pixels)
+    )
+    records = work.room("records")(record * int(counts.sum()))
+    received, received_counts = comm.alltoallv(records, counts * record, work.room("received records"))
+    block = int(starts[rank + 1] - starts[rank])
+    won = work.room("flags")(len(received) // record)
+    _core.composite_resolve(received, block, tie, work.room("block")(16 * block), won)
+    won, _ = comm.alltoallv(won, received_counts // record, work.room("won"))
+    mine = regions[rank]
+    full = mine == (0, nx - 1, 0, ny - 1)
+    sent = [_row_bytes(_full_frame(buffers, name, dtype, row, pixels)) for name, (dtype, row) in layout.items()]
     out = None
-    if comm.rank == target:
-        # The root's own arrays already hold its hits and its misses; where another rank
-        # won, that rank's values replace the root's.
-        out = {}
-        for name, (dtype, row) in layout.items():
-            values = buffers.get(name)
-            if values is None:
-                values = np.full((len(hit_keys), *row), miss_value(name, dtype), dtype)
-            values = values.astype(dtype, copy=False)
-            for rank, message in enumerate(received):
-                if rank != target:
-                    indices, arrays = message
-                    values[indices] = arrays[name] if name in arrays else miss_value(name, dtype)
-            out[name] = values
-    if root is None:
+    if mine is not None:
+        x0, x1, y0, y1 = mine
+        n = max(0, x1 - x0 + 1) * max(0, y1 - y0 + 1)
+        # A rank receiving the whole frame starts from its own arrays: its hits that lost
+        # are overwritten by the winners' rows, its own winners are in place already.
         out = {
-            name: comm.broadcast(out[name] if comm.rank == target else np.empty((len(hit_keys), *row), dtype), target)
+            name: _full_frame(buffers, name, dtype, row, pixels)
+            if full
+            else np.full((n, *row), miss_value(name, dtype), dtype)
             for name, (dtype, row) in layout.items()
         }
+    targets = frame_regions(regions)
+    if full:
+        targets[rank] = (0, -1, 0, -1)
+    row_bytes = 4 + sum(values.shape[1] for values in sent)
+    room = len(records) // record * row_bytes * int((targets[:, 0] <= targets[:, 1]).sum())
+    messages = work.room("messages")(room)
+    sizes = _core.composite_rows(records, counts, starts, won, nx, targets, sent, messages)
+    messages = messages[: int(sizes.sum())]
+    received, received_sizes = comm.alltoallv(messages, sizes, work.room("received messages"))
+    if out is not None:
+        _core.composite_write(received, received_sizes, [_row_bytes(values) for values in out.values()])
     return out
+
+
+def _full_frame(buffers: dict[str, np.ndarray], name: str, dtype: np.dtype, row: tuple[int, ...], pixels: int) -> np.ndarray:
+    values = buffers.get(name)
+    if values is None:
+        return np.full((pixels, *row), miss_value(name, dtype), dtype)
+    return np.ascontiguousarray(values, dtype=dtype)
+
+
+def _row_bytes(values: np.ndarray) -> np.ndarray:
+    """An array's rows as bytes (a view): shape (rows, bytes per row)."""
+    return values.reshape(len(values), -1).view(np.uint8)

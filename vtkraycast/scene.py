@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+from dataclasses import replace
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -17,8 +18,8 @@ from .camera import Camera
 from .fields import GEOMETRY_ARRAYS, allocate, mesh_arrays, output_bytes, request_outputs, row_layout, select_arrays
 from .image import fill_image, set_arrays
 from .magnitudes import direction_shifts, scene_scale, shift_lengths
-from .mesh import prepare_mesh
-from .parallel import NO_HIT, communicator, composite, default_threads, triangle_keys
+from .mesh import PreparedMesh, prepare_mesh
+from .parallel import Workspace, communicator, composite, default_threads, triangle_keys
 from .sensors import Lidar, Panorama
 from .visibility import CROSSING_ARRAYS, crossing_arrays, layered_arrays, visible_points
 
@@ -153,6 +154,8 @@ class Scene:
             threads = default_threads(comm)
         self._threads = threads
         self._keys: np.ndarray | None = None  # each triangle's global key, for casts under MPI
+        self._global_mesh: PreparedMesh | None = None  # the mesh with global cell ids as cell_ids
+        self._work = Workspace()  # (compositing's buffers, kept from cast to cast)
         self._closed: bool | None = None  # whether every edge has an even number of triangles
         self._mesh = prepare_mesh(mesh)
         self._outputs = BufferPool()  # the arrays of the last casts, reused once unreferenced
@@ -443,10 +446,12 @@ class Scene:
         return pv.wrap(self._mesh.surface).extract_cells(surface_cells)
 
     def _cast_parallel(
-        self, camera: Camera | Any, *, root: int | None, **options: Any
+        self, camera: Camera | Any, *, root: int | None, extent: tuple[int, int, int, int] | None = None, **options: Any
     ) -> tuple[Camera, dict[str, np.ndarray] | None]:
         """The collective cast of a scene built with ``comm`` (see :meth:`cast`): the camera
-        and the image's arrays (None on ranks other than ``root``)."""
+        and the image's arrays on ``root`` (every rank when None; None elsewhere), or, given
+        ``extent`` (x0, x1, y0, y1: this rank's block of the image, as VTK's pipeline asks
+        for it), that block's arrays on every rank."""
         comm = self._comm
         if root is not None and not 0 <= root < comm.size:
             raise ValueError(f"root must be a rank (0 to {comm.size - 1}) or None, got {root}")
@@ -455,34 +460,38 @@ class Scene:
         names = select_arrays(found, options.pop("arrays", None), options.pop("interpolate", True))
         real = _precision(options.get("precision", "float64"))
         layout = {name: row_layout(found, name, real) for name in names if name in found.point or name in found.cell}
-        # Every rank's names and array layouts, merged in rank order: a rank may lack a
-        # mesh array (an empty piece has none) and still take part.
+        # Every rank's names, array layouts and block, merged in rank order: a rank may lack
+        # a mesh array (an empty piece has none) and still take part.
         merged: dict[str, tuple] = {}
-        for rank_names, rank_layout in comm.gather_object((names, layout), None):
+        regions = []
+        for rank_names, rank_layout, rank_extent in comm.gather_object((names, layout, extent), None):
             for name in rank_names:
                 merged.setdefault(name, rank_layout.get(name) or row_layout(found, name, real))
+            regions.append(rank_extent)
+        if extent is None:
+            whole = (0, camera.nx - 1, 0, camera.ny - 1)
+            regions = [whole if root is None or rank == root else None for rank in range(comm.size)]
         local = [name for name in merged if name in GEOMETRY_ARRAYS or name in found.point or name in found.cell]
-        needed = list(dict.fromkeys([*local, "Depth", "TriangleId"]))
+        needed = list(dict.fromkeys([*local, "Depth", "TriangleId", "vtkValidPointMask"]))
         if options.get("threads") is None:  # (the node's cores shared among its ranks)
             options["threads"] = self._threads
         options.pop("world_space", None)
-        _, buffers = self._cast_into(None, camera, arrays=needed, **options)
-        triangle = buffers["TriangleId"]
         if self._keys is None:  # (once per scene: a pass over every triangle)
             self._keys = triangle_keys(self._mesh.cell_ids, self._mesh.global_cell_ids, comm.rank)
-        keys = self._keys
-        hit_keys = np.where(triangle >= 0, keys[np.maximum(triangle, 0)] if len(keys) else NO_HIT, NO_HIT)
-        if self._mesh.global_cell_ids is not None and "CellId" in buffers:
-            cells = buffers["CellId"]
-            cells[cells >= 0] = self._mesh.global_cell_ids[cells[cells >= 0]]
+            # CellId written as the global cell id, where the input has them.
+            ids = self._mesh.global_cell_ids
+            self._global_mesh = self._mesh if ids is None else replace(self._mesh, cell_ids=ids[self._mesh.cell_ids])
+        _, buffers = self._cast_into(None, camera, arrays=needed, mesh=self._global_mesh, **options)
         tie = 32 * float(np.finfo(real).eps)  # the kernels' tie window (kTieTolerance, traverse.hpp)
-        return camera, composite(comm, buffers, hit_keys, dict(merged), root, tie)
+        shape = (camera.ny, camera.nx)
+        return camera, composite(comm, buffers, self._keys, dict(merged), shape, regions, tie, self._work)
 
     def _cast_into(
         self,
         image: vtkImageData | None,
         camera: Camera | Any,
         *,
+        mesh: PreparedMesh | None = None,
         world_space: bool = False,
         arrays: Iterable[str] | str | None = None,
         strategy: str = "auto",
@@ -495,7 +504,8 @@ class Scene:
         progress_bar: bool = False,
     ) -> tuple[Camera, dict[str, np.ndarray]]:
         """Casts (options as :meth:`cast`) and returns the camera and the output arrays,
-        set as ``image``'s point data and geometry when an image is given."""
+        set as ``image``'s point data and geometry when an image is given. ``mesh``: the
+        scene's mesh with other cell ids to write as CellId (the parallel cast's global ids)."""
         if not isinstance(camera, Camera):
             camera = Camera.from_vtk(camera)
         found = mesh_arrays(self._mesh)
@@ -526,7 +536,7 @@ class Scene:
         request.near, request.far = _shifted(camera.near, shift), _shifted(camera.far, shift)
         request.nx, request.ny, request.parallel = camera.nx, camera.ny, camera.parallel
         buffers = allocate(found, names, n, real, self._outputs)
-        request_outputs(request, self._mesh, found, buffers)
+        request_outputs(request, mesh or self._mesh, found, buffers)
         if image is not None:
             # The image and the arrays the core writes are set up before the cast: Python
             # run right after a cast meets cold caches (set up after, they took 0.3 to 0.5 ms
