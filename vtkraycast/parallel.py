@@ -273,54 +273,50 @@ def composite(
     (x0, x1, y0, y1, inclusive) it receives, None for nothing; ``work``: the scene's
     buffers. Returns this rank's region's arrays (None when it receives nothing).
 
-    Each rank decides the pixels of one block of the frame: the others send it their hits
-    there (pixel, depth, key), it flags each won or lost and sends the flags back; each
-    rank then sends its winners' rows to the ranks whose regions hold them. Only hits
-    travel, so the bytes moved follow the covered pixels, not the frame."""
+    Direct send: each rank sends every hit (depth, key, rows) to the ranks whose regions
+    hold its pixel, in one exchange; each keeps, per pixel, the hit the serial cast keeps.
+    A rank receiving the whole frame starts from its own arrays and keeps its own hits."""
     ny, nx = shape
-    pixels, size, rank = nx * ny, comm.size, comm.rank
+    pixels, rank = nx * ny, comm.rank
     for region in regions:
         if region is not None and region[0] <= region[1] and region[2] <= region[3]:
             if region[0] < 0 or region[1] >= nx or region[2] < 0 or region[3] >= ny:
                 raise ValueError(f"the region {region} reaches beyond the {nx}x{ny} image")
-    starts = np.array([pixels * b // size for b in range(size + 1)], dtype=np.int64)
-    record = 20  # (bytes per record: offset, depth, key; src/compositing.hpp)
-    hit = buffers["vtkValidPointMask"].view(np.uint8)
-    counts = _core.composite_records(
-        hit, buffers["TriangleId"], buffers["Depth"], keys, starts, work.room("records")(record * pixels)
-    )
-    records = work.room("records")(record * int(counts.sum()))
-    received, received_counts = comm.alltoallv(records, counts * record, work.room("received records"))
-    block = int(starts[rank + 1] - starts[rank])
-    won = work.room("flags")(len(received) // record)
-    _core.composite_resolve(received, block, tie, work.room("block")(16 * block), won)
-    won, _ = comm.alltoallv(won, received_counts // record, work.room("won"))
+    hits = (buffers["vtkValidPointMask"].view(np.uint8), buffers["TriangleId"], buffers["Depth"], keys)
     mine = regions[rank]
     full = mine == (0, nx - 1, 0, ny - 1)
-    sent = [_row_bytes(_full_frame(buffers, name, dtype, row, pixels)) for name, (dtype, row) in layout.items()]
-    out = None
-    if mine is not None:
-        x0, x1, y0, y1 = mine
-        n = max(0, x1 - x0 + 1) * max(0, y1 - y0 + 1)
-        # A rank receiving the whole frame starts from its own arrays: its hits that lost
-        # are overwritten by the winners' rows, its own winners are in place already.
-        out = {
-            name: _full_frame(buffers, name, dtype, row, pixels)
-            if full
-            else np.full((n, *row), miss_value(name, dtype), dtype)
-            for name, (dtype, row) in layout.items()
-        }
+    # Depth and the mask travel in the records (every hit sent is a hit).
+    rows = {name: value for name, value in layout.items() if name not in ("Depth", "vtkValidPointMask")}
+    sent = [_row_bytes(_full_frame(buffers, name, dtype, row, pixels)) for name, (dtype, row) in rows.items()]
     targets = frame_regions(regions)
     if full:
-        targets[rank] = (0, -1, 0, -1)
-    row_bytes = 4 + sum(values.shape[1] for values in sent)
-    room = len(records) // record * row_bytes * int((targets[:, 0] <= targets[:, 1]).sum())
-    messages = work.room("messages")(room)
-    sizes = _core.composite_rows(records, counts, starts, won, nx, targets, sent, messages)
-    messages = messages[: int(sizes.sum())]
-    received, received_sizes = comm.alltoallv(messages, sizes, work.room("received messages"))
-    if out is not None:
-        _core.composite_write(received, received_sizes, [_row_bytes(values) for values in out.values()])
+        targets[rank] = (0, -1, 0, -1)  # (its own hits stay where they are)
+    hit_bytes = 20 + sum(values.shape[1] for values in sent)  # (record: place, depth, key; compositing.hpp)
+    room = int(np.count_nonzero(targets[:, 0] <= targets[:, 1])) * int(np.count_nonzero(hits[0])) * hit_bytes
+    messages = work.room("sent")(room)
+    sizes = _core.composite_send(*hits, nx, targets, sent, messages)
+    received, received_sizes = comm.alltoallv(messages[: int(sizes.sum())], sizes, work.room("received"))
+    if mine is None:
+        return None
+    x0, x1, y0, y1 = mine
+    n = max(0, x1 - x0 + 1) * max(0, y1 - y0 + 1)
+    out = {
+        name: _full_frame(buffers, name, dtype, row, pixels) if full else np.full((n, *row), miss_value(name, dtype), dtype)
+        for name, (dtype, row) in layout.items()
+    }
+    depth = out.get("Depth")
+    mask = out.get("vtkValidPointMask")
+    _core.composite_receive(
+        received,
+        received_sizes,
+        *(hits if full else (None,) * 4),
+        tie,
+        work.room("region")(24 * n),
+        [_row_bytes(out[name]) for name in rows],
+        depth,
+        None if mask is None else mask.view(np.uint8),
+        n,
+    )
     return out
 
 

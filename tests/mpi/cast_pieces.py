@@ -2,7 +2,8 @@
 
 Every rank builds the same test mesh (a torus with point and cell arrays, and the input's
 cell order as global cell ids), keeps its own piece of the cells (rank 0 none when asked:
-a rank without triangles), casts it with ``vrc.cast(piece, camera, comm=...)`` and the
+a rank without triangles; with ghosts, its neighbours' boundary cells flagged duplicate;
+for "twins", two coincident squares on different ranks), casts it with ``vrc.cast(piece, camera, comm=...)`` and the
 image reaches rank 0 (``root=0``) or every rank (``root=None``); rank 0 writes the arrays.
 """
 
@@ -14,12 +15,14 @@ from mpi4py import MPI
 import vtkraycast as vrc
 
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parent.parent))
-from test_mpi import CAMERA, pieces, torus
+from test_mpi import CAMERA, pieces, torus, twin_pieces, twin_planes
 
 comm = MPI.COMM_WORLD
 out, mode = sys.argv[1], sys.argv[2]
-mesh = torus()
-piece = pieces(mesh, comm.size, empty_first=mode == "empty_first")[comm.rank]
+if mode == "twins":
+    piece = twin_pieces(twin_planes(), comm.size)[comm.rank]
+else:
+    piece = pieces(torus(), comm.size, empty_first=mode == "empty_first", ghosts=mode == "ghosts")[comm.rank]
 before = piece.copy(deep=True)
 image = vrc.cast(piece, CAMERA, comm=comm, root=0)
 everywhere = vrc.Scene(piece, comm=comm).cast(CAMERA, root=None, arrays=["Depth", "CellId"])
