@@ -112,7 +112,9 @@ def _run(mpi: str, n: int, mode: str, tmp_path: Path) -> dict[str, np.ndarray]:
     return dict(np.load(out))
 
 
-@pytest.mark.parametrize(("n", "mode"), [(2, "cut"), (3, "cut"), (3, "empty_first"), (2, "ghosts"), (3, "ghosts")])
+@pytest.mark.parametrize(
+    ("n", "mode"), [(2, "cut"), (3, "cut"), (3, "empty_first"), (2, "ghosts"), (3, "ghosts"), (3, "pieces")]
+)
 def test_ranks_give_the_serial_image(mpi, n, mode, tmp_path):
     got = _run(mpi, n, mode, tmp_path)
     serial = vrc.cast(torus(), CAMERA)

@@ -248,7 +248,9 @@ class RayCastFilter(VTKPythonAlgorithmBase):
         """The collective cast under MPI; this rank's output is the block of rows and
         columns the pipeline asks of it (its update extent)."""
         x0, x1, y0, y1 = info.Get(vtkStreamingDemandDrivenPipeline.UPDATE_EXTENT())[:4]
-        camera, block = self._scene._cast_parallel(self._view(data), root=None, extent=(x0, x1, y0, y1), **self._options())
+        camera, block = self._scene._cast_parallel(
+            self._view(data), root=None, extent=(x0, x1, y0, y1), **self._options()
+        )
         fill_image(output, camera, {}, world_space=self._world_space)
         output.SetExtent(x0, x1, y0, y1, 0, 0)
         set_arrays(output, block)

@@ -24,6 +24,8 @@ import numpy as np
 from . import _core
 from .fields import miss_value
 
+#: The largest message an exchange sends in one piece (a C int counts MPI's bytes).
+MESSAGE_PIECE = 2**30
 #: Where received bytes go: (bytes, np.uint8) -> a uint8 array of that length.
 Room = Callable[[int, type], np.ndarray]
 
@@ -170,19 +172,24 @@ class Mpi4pyComm:
         self._comm.Alltoall(np.ascontiguousarray(counts, dtype=np.int64), received)
         sends, receives = _offsets(counts), _offsets(received)
         out = room(int(receives[-1]), np.uint8)
-        # MPI's counts and displacements are C ints: beyond 2 GiB, messages in pieces
-        # (in order: MPI keeps the order of messages between two ranks with one tag).
-        small = self._comm.allreduce(max(int(sends[-1]), int(receives[-1])), op=MPI.MAX) < 2**31
-        if small:
+        # MPI's counts and displacements are C ints: beyond that, messages in pieces (in
+        # order: MPI keeps the order of messages between two ranks with one tag).
+        piece = MESSAGE_PIECE
+        if self._comm.allreduce(max(int(sends[-1]), int(receives[-1])), op=MPI.MAX) <= piece:
             self._comm.Alltoallv([send, (counts, sends[:-1]), MPI.BYTE], [out, (received, receives[:-1]), MPI.BYTE])
             return out, received
-        piece = 2**30
         requests = []
         for other in range(self.size):
             incoming = out[receives[other] : receives[other + 1]]
             outgoing = send[sends[other] : sends[other + 1]]
-            requests += [self._comm.Irecv([incoming[a : a + piece], MPI.BYTE], other, _TAG) for a in range(0, len(incoming), piece)]
-            requests += [self._comm.Isend([outgoing[a : a + piece], MPI.BYTE], other, _TAG) for a in range(0, len(outgoing), piece)]
+            requests += [
+                self._comm.Irecv([incoming[a : a + piece], MPI.BYTE], other, _TAG)
+                for a in range(0, len(incoming), piece)
+            ]
+            requests += [
+                self._comm.Isend([outgoing[a : a + piece], MPI.BYTE], other, _TAG)
+                for a in range(0, len(outgoing), piece)
+            ]
         MPI.Request.Waitall(requests)
         return out, received
 
@@ -301,7 +308,9 @@ def composite(
     x0, x1, y0, y1 = mine
     n = max(0, x1 - x0 + 1) * max(0, y1 - y0 + 1)
     out = {
-        name: _full_frame(buffers, name, dtype, row, pixels) if full else np.full((n, *row), miss_value(name, dtype), dtype)
+        name: _full_frame(buffers, name, dtype, row, pixels)
+        if full
+        else np.full((n, *row), miss_value(name, dtype), dtype)
         for name, (dtype, row) in layout.items()
     }
     depth = out.get("Depth")
@@ -320,7 +329,9 @@ def composite(
     return out
 
 
-def _full_frame(buffers: dict[str, np.ndarray], name: str, dtype: np.dtype, row: tuple[int, ...], pixels: int) -> np.ndarray:
+def _full_frame(
+    buffers: dict[str, np.ndarray], name: str, dtype: np.dtype, row: tuple[int, ...], pixels: int
+) -> np.ndarray:
     values = buffers.get(name)
     if values is None:
         return np.full((pixels, *row), miss_value(name, dtype), dtype)

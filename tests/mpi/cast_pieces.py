@@ -3,7 +3,8 @@
 Every rank builds the same test mesh (a torus with point and cell arrays, and the input's
 cell order as global cell ids), keeps its own piece of the cells (rank 0 none when asked:
 a rank without triangles; with ghosts, its neighbours' boundary cells flagged duplicate;
-for "twins", two coincident squares on different ranks), casts it with ``vrc.cast(piece, camera, comm=...)`` and the
+for "twins", two coincident squares on different ranks; for "pieces", messages sent in
+pieces of 4 KiB), casts it with ``vrc.cast(piece, camera, comm=...)`` and the
 image reaches rank 0 (``root=0``) or every rank (``root=None``); rank 0 writes the arrays.
 """
 
@@ -19,6 +20,8 @@ from test_mpi import CAMERA, pieces, torus, twin_pieces, twin_planes
 
 comm = MPI.COMM_WORLD
 out, mode = sys.argv[1], sys.argv[2]
+if mode == "pieces":  # (messages beyond MPI's int counts, as a 4 KiB piece stands for)
+    vrc.parallel.MESSAGE_PIECE = 4096
 if mode == "twins":
     piece = twin_pieces(twin_planes(), comm.size)[comm.rank]
 else:
