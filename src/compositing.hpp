@@ -234,7 +234,8 @@ void receive_hits(const uint8_t* messages, const int64_t* bytes, std::size_t sen
         if (b.own) b.key = std::min(b.key, own->key(int64_t(r.place)));
     }
     // A pixel's own hit, if it wins, is already in place; a received winner's rows are
-    // written (the first, should two senders hold the same triangle).
+    // written (the first, should two senders hold the same triangle). The region arrays may
+    // be own's: a pixel is written once, after every read of own's hit there.
     std::vector<uint32_t> places;
     std::vector<std::size_t> from;
     message = messages;
