@@ -128,15 +128,16 @@ inline std::size_t message_row_bytes(const std::vector<Rows>& arrays) {
 /// The hit pixels of [first, end), ascending, appended to `pixels`.
 inline void hit_pixels(const uint8_t* hit, int64_t first, int64_t end, std::vector<int64_t>& pixels) {
     int64_t i = first;
-    while (i < end) {
-        uint64_t eight;  // (eight pixels at a time: a frame is mostly runs of misses or hits)
-        if (i + 8 <= end && (std::memcpy(&eight, hit + i, 8), eight == 0)) {
-            i += 8;
-            continue;
-        }
-        if (hit[i]) pixels.push_back(i);
-        ++i;
+    for (; i + 8 <= end; i += 8) {  // (eight pixels a step, each hit a set bit: no branch per pixel)
+        uint64_t eight;
+        std::memcpy(&eight, hit + i, 8);
+        eight |= eight >> 4;
+        eight |= eight >> 2;
+        eight |= eight >> 1;
+        for (eight &= 0x0101010101010101ull; eight; eight &= eight - 1) pixels.push_back(i + __builtin_ctzll(eight) / 8);
     }
+    for (; i < end; ++i)
+        if (hit[i]) pixels.push_back(i);
 }
 
 /// Every hit of `hits` in each receiving region, into `out` (`room` bytes), one message
@@ -159,6 +160,11 @@ void send_hits(const Hits<Depth>& hits, const std::vector<Region>& regions, cons
         if (std::size_t(message - out) + n * row_bytes > room) throw std::invalid_argument("no room for the hits");
         uint8_t* records = message;  // (messages follow each other unaligned: records copied bytewise)
         for (std::size_t k = 0; k < n; ++k) {
+            // (in two stages: a hit's triangle and depth, then, once they are in, its key)
+            if (k + 2 * kRowsAhead < n) {
+                __builtin_prefetch(hits.triangle + pixels[k + 2 * kRowsAhead]);
+                __builtin_prefetch(hits.depth + pixels[k + 2 * kRowsAhead]);
+            }
             if (k + kRowsAhead < n) __builtin_prefetch(hits.keys + hits.triangle[pixels[k + kRowsAhead]]);
             regions[r].find(pixels[k], place);
             const HitRecord record{uint32_t(place), double(hits.depth[pixels[k]]), hits.key(pixels[k])};
@@ -175,93 +181,91 @@ void send_hits(const Hits<Depth>& hits, const std::vector<Region>& regions, cons
     }
 }
 
-/// What a region's pixel has so far: the least depth, how many hits lie within the tie
-/// tolerance of it (own included), and, for ties only, the lowest key among them.
-struct Best {
-    double depth;
-    int64_t key;
-    int32_t candidates;
-    bool own;    ///< this rank's own hit is among the candidates
-    bool taken;  ///< a received hit was written here
-};
-static_assert(sizeof(Best) == 24);  // (the scratch vtkraycast/parallel.py provides per pixel)
-
 /// The receiver's side: keeps, for every pixel that received hits (`messages`, as
 /// send_hits made them, sizes in `bytes`), the hit the serial cast keeps: the least depth,
 /// and among the hits within the tie tolerance of it (the same point reached through two
-/// triangles) the lowest key. Keys are looked at only where two hits tie. `own`: this
-/// rank's own full-frame hits, already in the region arrays (the region is then the whole
-/// frame), or null. Winning received hits' rows are written into `arrays`, their depth into
-/// `depth_out` (Depth's rows, or null) and 1 into `mask_out` (or null). `best`: room for one
-/// per pixel of the region; only the pixels some hit names are touched.
+/// triangles) the lowest key, looked at only where two hits tie. `own`: this rank's own
+/// full-frame hits, already in the region arrays (the region is then the whole frame), or
+/// null. Winning received hits' rows are written into `arrays`, their depth into
+/// `depth_out` (Depth's rows, or null) and 1 into `mask_out` (or null).
+///
+/// Each sender's hits come in ascending places, so the senders' streams are merged and
+/// every pixel decided once, in one pass, without a per-pixel scratch array. The merge
+/// looks at every sender with hits left: cheap when few ranks send to a region (two, or a
+/// piece's few neighbours in ParaView's layout).
 template <class Depth>
 void receive_hits(const uint8_t* messages, const int64_t* bytes, std::size_t senders, const Hits<Depth>* own,
-                  double tie, Best* best, const std::vector<Rows>& arrays, Depth* depth_out, uint8_t* mask_out,
+                  double tie, const std::vector<Rows>& arrays, Depth* depth_out, uint8_t* mask_out,
                   std::size_t pixels) {
+    struct Stream {
+        const uint8_t* message;
+        std::size_t n, next = 0;
+        HitRecord head;
+        std::vector<uint32_t> places;  ///< where its winners go
+        std::vector<std::size_t> from;  ///< which of its hits they are
+        bool load() {  // (records unaligned in the message: copied out)
+            if (next >= n) return false;
+            const uint32_t last = next ? head.place : 0;
+            std::memcpy(&head, message + next * sizeof(HitRecord), sizeof(HitRecord));
+            if (next && head.place <= last) throw std::runtime_error("a compositing message out of order");
+            return true;
+        }
+    };
     const std::size_t row_bytes = message_row_bytes(arrays);
-    std::vector<HitRecord> records;  // (every sender's, aligned)
-    std::vector<std::size_t> starts{0};
+    std::vector<Stream> streams(senders);
+    std::vector<Stream*> active;
     const uint8_t* message = messages;
     for (std::size_t s = 0; s < senders; ++s) {
         if (bytes[s] % int64_t(row_bytes) != 0) throw std::runtime_error("a compositing message of the wrong size");
-        const std::size_t n = std::size_t(bytes[s]) / row_bytes;
-        const std::size_t at = records.size();
-        records.resize(at + n);
-        std::memcpy(records.data() + at, message, n * sizeof(HitRecord));
-        for (std::size_t k = at; k < at + n; ++k)
-            if (records[k].place >= pixels) throw std::runtime_error("a compositing message names a pixel outside the region");
-        starts.push_back(records.size());
+        streams[s].message = message;
+        streams[s].n = std::size_t(bytes[s]) / row_bytes;
+        if (streams[s].load()) active.push_back(&streams[s]);
         message += bytes[s];
     }
-    const auto candidate = [&](double depth, const Best& b) { return depth <= b.depth + tie * std::fabs(b.depth); };
-    const auto own_hit = [&](uint32_t place) { return own && own->hit[place]; };
-    for (const HitRecord& r : records)
-        best[r.place] = {own_hit(r.place) ? double(own->depth[r.place]) : HUGE_VAL,
-                         std::numeric_limits<int64_t>::max(), 0, false, false};
-    for (const HitRecord& r : records) best[r.place].depth = r.depth < best[r.place].depth ? r.depth : best[r.place].depth;
-    for (const HitRecord& r : records) {
-        Best& b = best[r.place];
-        b.candidates += candidate(r.depth, b);
-        if (own_hit(r.place) && !b.own && candidate(double(own->depth[r.place]), b)) {
-            b.own = true;
-            ++b.candidates;
+    const auto candidate = [&](double depth, double nearest) { return depth <= nearest + tie * std::fabs(nearest); };
+    std::vector<Stream*> group;
+    while (!active.empty()) {
+        uint32_t place = active.front()->head.place;
+        for (const Stream* s : active) place = std::min(place, s->head.place);
+        if (place >= pixels) throw std::runtime_error("a compositing message names a pixel outside the region");
+        group.clear();
+        for (Stream* s : active)
+            if (s->head.place == place) group.push_back(s);
+        const bool mine = own && own->hit[place];
+        double nearest = mine ? double(own->depth[place]) : HUGE_VAL;
+        for (const Stream* s : group) nearest = std::min(nearest, s->head.depth);
+        const bool own_candidate = mine && candidate(double(own->depth[place]), nearest);
+        int candidates = own_candidate;
+        for (const Stream* s : group) candidates += candidate(s->head.depth, nearest);
+        Stream* winner = nullptr;
+        if (candidates == 1 && !own_candidate) {
+            for (Stream* s : group)
+                if (candidate(s->head.depth, nearest)) winner = s;
+        } else if (candidates > 1) {
+            int64_t key = own_candidate ? own->key(int64_t(place)) : std::numeric_limits<int64_t>::max();
+            for (Stream* s : group)  // (the first sender of the lowest key: a triangle two ranks hold)
+                if (candidate(s->head.depth, nearest) && s->head.key < key) key = s->head.key, winner = s;
+        }
+        if (winner) {
+            winner->places.push_back(place);
+            winner->from.push_back(winner->next);
+            if (depth_out) depth_out[place] = Depth(winner->head.depth);
+            if (mask_out) mask_out[place] = 1;
+        }
+        for (Stream* s : group) {
+            ++s->next;
+            if (!s->load()) active.erase(std::find(active.begin(), active.end(), s));
         }
     }
-    for (const HitRecord& r : records) {  // (ties: the lowest key)
-        Best& b = best[r.place];
-        if (b.candidates < 2) continue;
-        if (candidate(r.depth, b) && r.key < b.key) b.key = r.key;
-        if (b.own) b.key = std::min(b.key, own->key(int64_t(r.place)));
-    }
-    // A pixel's own hit, if it wins, is already in place; a received winner's rows are
-    // written (the first, should two senders hold the same triangle). The region arrays may
-    // be own's: a pixel is written once, after every read of own's hit there.
-    std::vector<uint32_t> places;
-    std::vector<std::size_t> from;
-    message = messages;
-    for (std::size_t s = 0; s < senders; ++s) {
-        const std::size_t n = starts[s + 1] - starts[s];
-        places.clear();
-        from.clear();
-        for (std::size_t k = 0; k < n; ++k) {
-            const HitRecord& r = records[starts[s] + k];
-            Best& b = best[r.place];
-            if (b.taken || !candidate(r.depth, b)) continue;
-            if (b.candidates > 1 && (r.key != b.key || (b.own && own->key(int64_t(r.place)) == b.key))) continue;
-            b.taken = true;
-            places.push_back(r.place);
-            from.push_back(k);
-            if (depth_out) depth_out[r.place] = Depth(r.depth);
-            if (mask_out) mask_out[r.place] = 1;
-        }
-        const uint8_t* rows = message + n * sizeof(HitRecord);
+    // The region arrays may be own's: every read of own's hits is done.
+    for (Stream& s : streams) {
+        const uint8_t* rows = s.message + s.n * sizeof(HitRecord);
         for (const Rows& a : arrays) {
             copy_rows(
-                a.width, rows, a.data, places.size(), [&](std::size_t k) { return from[k]; },
-                [&](std::size_t k) { return std::size_t(places[k]); }, true);
-            rows += n * a.width;
+                a.width, rows, a.data, s.places.size(), [&](std::size_t k) { return s.from[k]; },
+                [&](std::size_t k) { return std::size_t(s.places[k]); }, true);
+            rows += s.n * a.width;
         }
-        message += bytes[s];
     }
 }
 

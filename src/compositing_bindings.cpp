@@ -72,12 +72,11 @@ nb::ndarray<nb::numpy, int64_t> send(In<uint8_t> hit, In<int64_t> triangle, In<D
 template <class Depth>
 void receive(In<uint8_t> messages, In<int64_t> bytes, std::optional<In<uint8_t>> hit,
              std::optional<In<int64_t>> triangle, std::optional<In<Depth>> depth, std::optional<In<int64_t>> keys,
-             double tie, Out scratch, std::vector<Bytes> arrays, std::optional<Mutable<Depth>> depth_out,
+             double tie, std::vector<Bytes> arrays, std::optional<Mutable<Depth>> depth_out,
              std::optional<Mutable<uint8_t>> mask_out, std::size_t pixels) {
     int64_t total = 0;
     for (std::size_t s = 0; s < bytes.shape(0); ++s) total += bytes.data()[s];
     if (total != int64_t(messages.shape(0))) throw std::invalid_argument("message sizes do not add up");
-    if (scratch.shape(0) < pixels * sizeof(cmp::Best)) throw std::invalid_argument("no room for the region");
     std::optional<cmp::Hits<Depth>> own;
     if (hit) {
         if (!triangle || !depth || !keys) throw std::invalid_argument("own hits need their mask, triangles, depths and keys");
@@ -90,9 +89,8 @@ void receive(In<uint8_t> messages, In<int64_t> bytes, std::optional<In<uint8_t>>
     if ((depth_out && depth_out->shape(0) != pixels) || (mask_out && mask_out->shape(0) != pixels))
         throw std::invalid_argument("Depth and vtkValidPointMask need one row per pixel of the region");
     nb::gil_scoped_release release;
-    cmp::receive_hits(messages.data(), bytes.data(), bytes.shape(0), own ? &*own : nullptr, tie,
-                      reinterpret_cast<cmp::Best*>(scratch.data()), rows, depth_out ? depth_out->data() : nullptr,
-                      mask_out ? mask_out->data() : nullptr, pixels);
+    cmp::receive_hits(messages.data(), bytes.data(), bytes.shape(0), own ? &*own : nullptr, tie, rows,
+                      depth_out ? depth_out->data() : nullptr, mask_out ? mask_out->data() : nullptr, pixels);
 }
 
 }  // namespace
@@ -110,10 +108,10 @@ void bind_compositing(nb::module_& m) {
         "Keeps, per pixel of this rank's region, the received hit the serial cast keeps (least depth, then lowest "
         "key within the tie tolerance), against this rank's own hits when given (its region is then the whole frame "
         "and its arrays hold them): writes the winners' rows into `arrays`, their depth into `depth_out`, 1 into "
-        "`mask_out`. `scratch`: 24 bytes per pixel of the region.";
+        "`mask_out`.";
     auto bind_receive = [&](auto f) {
         m.def("composite_receive", f, "messages"_a, "bytes"_a, "hit"_a.none(), "triangle_id"_a.none(),
-              "depth"_a.none(), "keys"_a.none(), "tie"_a, "scratch"_a, "arrays"_a, "depth_out"_a.none(),
+              "depth"_a.none(), "keys"_a.none(), "tie"_a, "arrays"_a, "depth_out"_a.none(),
               "mask_out"_a.none(), "pixels"_a, receive_doc);
     };
     bind_receive(&receive<double>);

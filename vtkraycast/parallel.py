@@ -320,7 +320,6 @@ def composite(
         received_sizes,
         *(hits if full else (None,) * 4),
         tie,
-        work.room("region")(24 * n),
         [_row_bytes(out[name]) for name in rows],
         depth,
         None if mask is None else mask.view(np.uint8),
