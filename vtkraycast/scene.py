@@ -156,6 +156,7 @@ class Scene:
         self._keys: np.ndarray | None = None  # each triangle's global key, for casts under MPI
         self._global_mesh: PreparedMesh | None = None  # the mesh with global cell ids as cell_ids
         self._work = Workspace()  # (compositing's buffers, kept from cast to cast)
+        self._bounds: tuple[np.ndarray, np.ndarray] | None = None  # (contains' box)
         self._closed: bool | None = None  # whether every edge has an even number of triangles
         self._mesh = prepare_mesh(mesh)
         self._outputs = BufferPool()  # the arrays of the last casts, reused once unreferenced
@@ -763,10 +764,24 @@ class Scene:
         """
         self._check_closed()
         points = np.asarray(points, dtype=np.float64)
-        # (any direction gives the same answer; one in no face's plane of common meshes)
-        direction = np.array([0.5773502691896257, 0.5773502691896258, 0.5773502691896256])
-        (counts, on_surface), shape, _ = self._crossings(points, direction, 0.0, math.inf, threads, True)
+        # Any direction gives the same answer. Components of unequal size (no face of common
+        # meshes holds such a direction), their signs chosen point by point towards the
+        # nearer side of the mesh's box on each axis: the ray then leaves the box through its
+        # nearest face, meeting fewer nodes and crossings on the way.
+        low, high = self._box()
+        toward_high = (high - points) < (points - low)
+        directions = np.where(toward_high, 1.0, -1.0) * np.array(
+            [0.5773502691896257, 0.5773502691896258, 0.5773502691896256]
+        )
+        (counts, on_surface), shape, _ = self._crossings(points, directions, 0.0, math.inf, threads, True)
         return ((counts % 2 == 1) | on_surface.view(bool)).reshape(shape)
+
+    def _box(self) -> tuple[np.ndarray, np.ndarray]:
+        """The least and greatest coordinates of the mesh's points (once per scene)."""
+        if self._bounds is None:
+            points = self._mesh.points
+            self._bounds = (points.min(axis=0), points.max(axis=0)) if len(points) else (np.zeros(3), np.zeros(3))
+        return self._bounds
 
     def _check_closed(self) -> None:
         if self._closed is None:
