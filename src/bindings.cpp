@@ -444,6 +444,24 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         "(finite, nonzero directions, least and greatest origin component, least and greatest of the directions' "
         "largest |component|) in one parallel pass.");
     m.def(
+        "exit_directions",
+        [](Points points, std::array<double, 3> low, std::array<double, 3> high, std::array<double, 3> direction) {
+            const std::size_t n = points.shape(0);
+            auto* out = new double[3 * n];
+            {
+                nb::gil_scoped_release release;
+                const double* p = points.data();
+                for (std::size_t i = 0; i < 3 * n; ++i) {
+                    const int c = int(i % 3);
+                    out[i] = high[c] - p[i] < p[i] - low[c] ? direction[c] : -direction[c];
+                }
+            }
+            return owned_array(out, n, 3);
+        },
+        "points"_a, "low"_a, "high"_a, "direction"_a,
+        "Per point, `direction` with each component's sign towards the nearer side of the box [low, high] on its "
+        "axis: a ray that leaves the box through its nearest face.");
+    m.def(
         "cpu_supports_avx2",
         [] { return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"); },
         "Whether this CPU runs the AVX2 build of the core (AVX2 and FMA).");

@@ -768,13 +768,14 @@ class Scene:
         # meshes holds such a direction), their signs chosen point by point towards the
         # nearer side of the mesh's box on each axis: the ray then leaves the box through its
         # nearest face, meeting fewer nodes and crossings on the way.
-        low, high = self._box()
-        toward_high = (high - points) < (points - low)
-        directions = np.where(toward_high, 1.0, -1.0) * np.array(
-            [0.5773502691896257, 0.5773502691896258, 0.5773502691896256]
-        )
+        direction = [0.5773502691896257, 0.5773502691896258, 0.5773502691896256]
+        shape = points.shape[:-1]
+        if points.shape[-1:] != (3,):
+            raise ValueError(f"points must have shape (..., 3), got {points.shape}")
+        flat = np.ascontiguousarray(points.reshape(-1, 3))
+        directions = _core.exit_directions(flat, *self._box(), direction).reshape(*shape, 3)
         (counts, on_surface), shape, _ = self._crossings(points, directions, 0.0, math.inf, threads, True)
-        return ((counts % 2 == 1) | on_surface.view(bool)).reshape(shape)
+        return ((counts & 1).astype(bool) | on_surface.view(bool)).reshape(shape)
 
     def _box(self) -> tuple[np.ndarray, np.ndarray]:
         """The least and greatest coordinates of the mesh's points (once per scene)."""
