@@ -113,11 +113,13 @@ def _run(mpi: str, n: int, mode: str, tmp_path: Path) -> dict[str, np.ndarray]:
 
 
 @pytest.mark.parametrize(
-    ("n", "mode"), [(2, "cut"), (3, "cut"), (3, "empty_first"), (2, "ghosts"), (3, "ghosts"), (3, "pieces")]
+    ("n", "mode"),
+    [(2, "cut"), (3, "cut"), (3, "empty_first"), (2, "ghosts"), (3, "ghosts"), (3, "pieces"), (2, "float32")],
 )
 def test_ranks_give_the_serial_image(mpi, n, mode, tmp_path):
     got = _run(mpi, n, mode, tmp_path)
-    serial = vrc.cast(torus(), CAMERA)
+    serial = vrc.cast(torus(), CAMERA, **({"precision": "float32"} if mode == "float32" else {}))
+    assert serial["Depth"].dtype == (np.float32 if mode == "float32" else np.float64)
     assert list(got["names"]) == [*serial.array_names, "GlobalIds"]
     np.testing.assert_array_equal(got["GlobalIds"], np.where(serial["CellId"] >= 0, serial["CellId"], 0))
     hit = serial["vtkValidPointMask"] == 1

@@ -4,7 +4,7 @@ Every rank builds the same test mesh (a torus with point and cell arrays, and th
 cell order as global cell ids), keeps its own piece of the cells (rank 0 none when asked:
 a rank without triangles; with ghosts, its neighbours' boundary cells flagged duplicate;
 for "twins", two coincident squares on different ranks; for "pieces", messages sent in
-pieces of 4 KiB), casts it with ``vrc.cast(piece, camera, comm=...)`` and the
+pieces of 4 KiB; for "float32", cast in that precision), casts it with ``vrc.cast(piece, camera, comm=...)`` and the
 image reaches rank 0 (``root=0``) or every rank (``root=None``); rank 0 writes the arrays.
 """
 
@@ -27,8 +27,9 @@ if mode == "twins":
 else:
     piece = pieces(torus(), comm.size, empty_first=mode == "empty_first", ghosts=mode == "ghosts")[comm.rank]
 before = piece.copy(deep=True)
-image = vrc.cast(piece, CAMERA, comm=comm, root=0)
-everywhere = vrc.Scene(piece, comm=comm).cast(CAMERA, root=None, arrays=["Depth", "CellId"])
+options = {"precision": "float32"} if mode == "float32" else {}
+image = vrc.cast(piece, CAMERA, comm=comm, root=0, **options)
+everywhere = vrc.Scene(piece, comm=comm).cast(CAMERA, root=None, arrays=["Depth", "CellId"], **options)
 assert piece == before  # the input is never modified
 assert (image is not None) == (comm.rank == 0) and everywhere is not None
 gathered = comm.gather(everywhere["Depth"], root=0)
