@@ -185,8 +185,8 @@ void send_hits(const Hits<Depth>& hits, const std::vector<Region>& regions, cons
 /// send_hits made them, sizes in `bytes`), the hit the serial cast keeps: the least depth,
 /// and among the hits within the tie tolerance of it (the same point reached through two
 /// triangles) the lowest key, looked at only where two hits tie. `own`: this rank's own
-/// full-frame hits, already in the region arrays (the region is then the whole frame), or
-/// null. Winning received hits' rows are written into `arrays`, their depth into
+/// hits in the region, already in the region arrays (a region of whole rows is a slice of
+/// its full-frame arrays), or null. Winning received hits' rows are written into `arrays`, their depth into
 /// `depth_out` (Depth's rows, or null) and 1 into `mask_out` (or null).
 ///
 /// Each sender's hits come in ascending places, so the senders' streams are merged and

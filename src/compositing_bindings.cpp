@@ -81,7 +81,7 @@ void receive(In<uint8_t> messages, In<int64_t> bytes, std::optional<In<uint8_t>>
     if (hit) {
         if (!triangle || !depth || !keys) throw std::invalid_argument("own hits need their mask, triangles, depths and keys");
         own = hits_of(*hit, *triangle, *depth, *keys);
-        if (own->pixels != pixels) throw std::invalid_argument("own hits are the whole frame");
+        if (own->pixels != pixels) throw std::invalid_argument("own hits cover the region, row for row");
     }
     const std::vector<cmp::Rows> rows = rows_of(arrays);
     for (const cmp::Rows& a : rows)
@@ -106,8 +106,8 @@ void bind_compositing(nb::module_& m) {
           "arrays"_a, "out"_a, send_doc);
     const char* receive_doc =
         "Keeps, per pixel of this rank's region, the received hit the serial cast keeps (least depth, then lowest "
-        "key within the tie tolerance), against this rank's own hits when given (its region is then the whole frame "
-        "and its arrays hold them): writes the winners' rows into `arrays`, their depth into `depth_out`, 1 into "
+        "key within the tie tolerance), against this rank's own hits when given (the region's rows of its "
+        "full-frame arrays, which are then the region arrays): writes the winners' rows into `arrays`, their depth into `depth_out`, 1 into "
         "`mask_out`.";
     auto bind_receive = [&](auto f) {
         m.def("composite_receive", f, "messages"_a, "bytes"_a, "hit"_a.none(), "triangle_id"_a.none(),
