@@ -282,8 +282,8 @@ def composite(
 
     Direct send: each rank sends every hit (depth, key, rows) to the ranks whose regions
     hold its pixel, in one exchange; each keeps, per pixel, the hit the serial cast keeps.
-    A rank receiving whole rows (the whole frame, a band) returns views of its own arrays,
-    where its own hits already are."""
+    A rank's region starts as its own arrays' values there (views when it is whole rows of
+    the frame: the whole frame, ParaView's bands), where its own hits already are."""
     ny, nx = shape
     pixels, rank = nx * ny, comm.rank
     for region in regions:
@@ -292,15 +292,11 @@ def composite(
                 raise ValueError(f"the region {region} reaches beyond the {nx}x{ny} image")
     hits = (buffers["vtkValidPointMask"].view(np.uint8), buffers["TriangleId"], buffers["Depth"], keys)
     mine = regions[rank]
-    # A region of whole rows (the whole frame, ParaView's bands) is a slice of this rank's
-    # own arrays: its own hits there stay where they are, only the others' travel.
-    in_place = mine is not None and mine[0] == 0 and mine[1] == nx - 1 and mine[2] <= mine[3]
     # Depth and the mask travel in the records (every hit sent is a hit).
     rows = {name: value for name, value in layout.items() if name not in ("Depth", "vtkValidPointMask")}
     sent = [_row_bytes(_full_frame(buffers, name, dtype, row, pixels)) for name, (dtype, row) in rows.items()]
-    targets = frame_regions(regions)
-    if in_place:
-        targets[rank] = (0, -1, 0, -1)
+    # A rank's own hits in its region stay in its own arrays (no message to itself).
+    targets = frame_regions([None if r == rank else other for r, other in enumerate(regions)])
     hit_bytes = 20 + sum(values.shape[1] for values in sent)  # (record: place, depth, key; compositing.hpp)
     room = int(np.count_nonzero(targets[:, 0] <= targets[:, 1])) * int(np.count_nonzero(hits[0])) * hit_bytes
     messages = work.room("sent")(room)
@@ -310,13 +306,17 @@ def composite(
         return None
     x0, x1, y0, y1 = mine
     n = max(0, x1 - x0 + 1) * max(0, y1 - y0 + 1)
-    if in_place:
-        first, end = y0 * nx, (y1 + 1) * nx
-        own = (*(values[first:end] for values in hits[:3]), keys)
-        out = {name: _full_frame(buffers, name, dtype, row, pixels)[first:end] for name, (dtype, row) in layout.items()}
-    else:
-        own = (None,) * 4
-        out = {name: np.full((n, *row), miss_value(name, dtype), dtype) for name, (dtype, row) in layout.items()}
+
+    def region(values: np.ndarray) -> np.ndarray:
+        """The region's rows of a full-frame array: a slice (a view) when they are whole
+        rows of the frame (the whole frame, ParaView's bands), else a copy."""
+        if x0 == 0 and x1 == nx - 1:
+            return values[y0 * nx : (y1 + 1) * nx]
+        block = values.reshape(ny, nx, *values.shape[1:])[y0 : y1 + 1, x0 : x1 + 1]
+        return np.ascontiguousarray(block).reshape(n, *values.shape[1:])
+
+    own = (*(region(values) for values in hits[:3]), keys)
+    out = {name: region(_full_frame(buffers, name, dtype, row, pixels)) for name, (dtype, row) in layout.items()}
     depth = out.get("Depth")
     mask = out.get("vtkValidPointMask")
     _core.composite_receive(
