@@ -26,8 +26,8 @@ from .fields import miss_value
 
 #: The largest message an exchange sends in one piece (a C int counts MPI's bytes).
 MESSAGE_PIECE = 2**30
-#: Where received bytes go: (bytes, np.uint8) -> a uint8 array of that length.
-Room = Callable[[int, type], np.ndarray]
+#: Where received bytes go: a uint8 array of the given length.
+Room = Callable[[int], np.ndarray]
 
 __all__ = [
     "Mpi4pyComm",
@@ -91,12 +91,14 @@ class VtkController:
         self._controller.Broadcast(message, root)
         return value if self.rank == root else _unpickled(message)
 
-    def alltoallv(self, send: np.ndarray, counts: np.ndarray, room: Room = np.empty) -> tuple[np.ndarray, np.ndarray]:
+    def alltoallv(
+        self, send: np.ndarray, counts: np.ndarray, room: Room | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Bytes ``send[segment r]`` (segments of ``counts`` bytes, in rank order) to each
         rank r; returns what every rank sent here (in ``room(bytes)``), in rank order, and
-        the sizes. VTK's
-        controllers have no all-to-all: blocking sends and receives, one pair at a time in
-        the same order on every rank (so none waits on a rank waiting on it)."""
+        the sizes. VTK's controllers have no all-to-all: blocking sends and receives, one
+        pair at a time in the same order on every rank (so none waits on a rank waiting on
+        it)."""
         from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
         from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
 
@@ -105,7 +107,7 @@ class VtkController:
         matrix[rank] = counts
         matrix = self.allreduce(matrix, "sum")
         sends, receives = _offsets(counts), _offsets(matrix[:, rank])
-        out = room(int(receives[-1]), np.uint8)
+        out = (room or _bytes)(int(receives[-1]))
         out[receives[rank] : receives[rank + 1]] = send[sends[rank] : sends[rank + 1]]
         for source in range(size):
             for target in range(size):
@@ -163,7 +165,9 @@ class Mpi4pyComm:
     def gather_object(self, value: Any, root: int | None = None) -> list[Any] | None:
         return self._comm.allgather(value) if root is None else self._comm.gather(value, root=root)
 
-    def alltoallv(self, send: np.ndarray, counts: np.ndarray, room: Room = np.empty) -> tuple[np.ndarray, np.ndarray]:
+    def alltoallv(
+        self, send: np.ndarray, counts: np.ndarray, room: Room | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Bytes ``send[segment r]`` (segments of ``counts`` bytes, in rank order) to each
         rank r; returns what every rank sent here (in ``room(bytes)``), in rank order, and
         the sizes."""
@@ -171,7 +175,7 @@ class Mpi4pyComm:
         received = np.empty(self.size, dtype=np.int64)
         self._comm.Alltoall(np.ascontiguousarray(counts, dtype=np.int64), received)
         sends, receives = _offsets(counts), _offsets(received)
-        out = room(int(receives[-1]), np.uint8)
+        out = (room or _bytes)(int(receives[-1]))
         # MPI's counts and displacements are C ints: beyond that, messages in pieces (in
         # order: MPI keeps the order of messages between two ranks with one tag).
         piece = MESSAGE_PIECE
@@ -192,6 +196,10 @@ class Mpi4pyComm:
             ]
         MPI.Request.Waitall(requests)
         return out, received
+
+
+def _bytes(n: int) -> np.ndarray:
+    return np.empty(n, np.uint8)
 
 
 def _offsets(counts: np.ndarray) -> np.ndarray:
@@ -244,9 +252,9 @@ class Workspace:
         self._buffers: dict[str, np.ndarray] = {}
 
     def room(self, role: str) -> Room:
-        """``room(bytes, np.uint8)``: the role's buffer, ``bytes`` long."""
+        """``room(bytes)``: the role's buffer, ``bytes`` long."""
 
-        def take(nbytes: int, dtype: type = np.uint8) -> np.ndarray:
+        def take(nbytes: int) -> np.ndarray:
             kept = self._buffers.get(role)
             if kept is None or len(kept) < nbytes:
                 kept = self._buffers[role] = np.empty(max(nbytes, 1) + nbytes // 4, np.uint8)
@@ -292,9 +300,10 @@ def composite(
                 raise ValueError(f"the region {region} reaches beyond the {nx}x{ny} image")
     hits = (buffers["vtkValidPointMask"].view(np.uint8), buffers["TriangleId"], buffers["Depth"], keys)
     mine = regions[rank]
+    frames = {name: _full_frame(buffers, name, dtype, row, pixels) for name, (dtype, row) in layout.items()}
     # Depth and the mask travel in the records (every hit sent is a hit).
-    rows = {name: value for name, value in layout.items() if name not in ("Depth", "vtkValidPointMask")}
-    sent = [_row_bytes(_full_frame(buffers, name, dtype, row, pixels)) for name, (dtype, row) in rows.items()]
+    rows = [name for name in layout if name not in ("Depth", "vtkValidPointMask")]
+    sent = [_row_bytes(frames[name]) for name in rows]
     # A rank's own hits in its region stay in its own arrays (no message to itself).
     targets = frame_regions([None if r == rank else other for r, other in enumerate(regions)])
     hit_bytes = 20 + sum(values.shape[1] for values in sent)  # (record: place, depth, key; compositing.hpp)
@@ -316,7 +325,7 @@ def composite(
         return np.ascontiguousarray(block).reshape(n, *values.shape[1:])
 
     own = (*(region(values) for values in hits[:3]), keys)
-    out = {name: region(_full_frame(buffers, name, dtype, row, pixels)) for name, (dtype, row) in layout.items()}
+    out = {name: region(values) for name, values in frames.items()}
     depth = out.get("Depth")
     mask = out.get("vtkValidPointMask")
     _core.composite_receive(
