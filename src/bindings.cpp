@@ -133,6 +133,8 @@ struct Request {
     int64_t nx = 1, ny = 1;
     bool parallel = false;
     std::optional<Points> origins, directions;  ///< arrays of rays, instead of a camera
+    /// > 0: the rays are a sweep (SweepRays) of this many rows, from the one origin in `origins`.
+    int64_t sweep_rows = 0;
     double tmin = 0, tmax = HUGE_VAL;
     std::string strategy = "auto", accel = "bvh", precision = "float64";
     bool backface_culling = false;
@@ -277,9 +279,15 @@ bool cast_as(const vrc::Scene& scene, const Request& q) {
     if (q.frame && q.any_hit) throw std::invalid_argument("any_hit serves rays, not cameras");
     if (q.frame) return run<Real>(scene, camera_rays(scene, q), q);
     if (!q.origins || !q.directions) throw std::invalid_argument("a request needs a camera frame or origins and directions");
+    if (!scene.has_bvh() && q.accel != "none") throw std::invalid_argument("a scene built without a BVH casts camera rays only");
+    if (q.sweep_rows > 0) {
+        const int64_t n = int64_t(q.directions->shape(0)), cols = n / q.sweep_rows;
+        if (q.origins->shape(0) != 1 || cols * q.sweep_rows != n)
+            throw std::invalid_argument("a sweep has one origin and sweep_rows rows of directions");
+        return run<Real>(scene, vrc::SweepRays(q.origins->data(), q.directions->data(), q.sweep_rows, cols, q.tmin, q.tmax), q);
+    }
     if (q.origins->shape(0) != q.directions->shape(0))
         throw std::invalid_argument("origins and directions must have the same number of rows");
-    if (!scene.has_bvh() && q.accel != "none") throw std::invalid_argument("a scene built without a BVH casts camera rays only");
     return run<Real>(scene, vrc::ArrayRays(q.origins->data(), q.directions->data(), q.origins->shape(0), q.tmin, q.tmax), q);
 }
 
@@ -352,6 +360,7 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         .def_rw("parallel", &Request::parallel)
         .def_rw("origins", &Request::origins, nb::arg().none())
         .def_rw("directions", &Request::directions, nb::arg().none())
+        .def_rw("sweep_rows", &Request::sweep_rows)
         .def_rw("tmin", &Request::tmin)
         .def_rw("tmax", &Request::tmax)
         .def_rw("strategy", &Request::strategy)

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <thread>
@@ -20,6 +21,7 @@
 #include "traverse_wide.hpp"
 #include "bin_triangles.hpp"
 #include "outputs.hpp"
+#include "traverse_bundle.hpp"
 #include "traverse_tile.hpp"
 
 namespace vrc {
@@ -159,7 +161,20 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         if (CameraCast::fits(rays.spec()) && CameraCast::fits(scene) && CameraCast::pays(scene, rays))
             camera.emplace(scene, rays, n_workers);
     }
+    // A sweep's tiles go as bundles (traverse_bundle.hpp) where the kernel's hits are exact
+    // (its culling by projection takes a hit to be a point of the triangle).
+    constexpr bool kBundles = std::is_same_v<Rays, SweepRays> && !kBruteForce && std::is_same_v<Kernel<Real>, Watertight<double>>;
     auto work = [&](unsigned w) {
+        if constexpr (kBundles) {
+            if (!context.any_hit) {
+                auto tracer = std::make_unique<BundleTracer<Kernel, Real>>(scene, rays, context);
+                for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
+                    tracer->trace(tile, store);
+                    tile_done();
+                }
+                return;
+            }
+        }
         if constexpr (kTiles) {
             if (camera) {
                 const std::vector<uint32_t> unknown = camera->prepare(w, n_workers, rays);

@@ -340,12 +340,14 @@ class Scene:
 
         found = mesh_arrays(self._mesh)
         names = select_arrays(found, options.pop("arrays", None), options.pop("interpolate", True))
-        origins, directions = panorama.rays()
+        _, directions = panorama.rays()
         culling = options.pop("backface_culling", False)
         unknown = set(options) - {"strategy", "precision", "accel", "threads"}
         if unknown:
             raise ValueError(f"{', '.join(sorted(unknown))} not supported for a panorama")
-        buffers, _ = self._cast_rays(origins, directions, names, panorama.near, panorama.far, culling, options)
+        buffers, _ = self._cast_rays(
+            panorama.eye, directions, names, panorama.near, panorama.far, culling, options, sweep_rows=panorama.ny
+        )
         image = pv.ImageData(dimensions=(panorama.nx, panorama.ny, 1))
         return set_arrays(image, buffers)
 
@@ -370,9 +372,16 @@ class Scene:
         found = mesh_arrays(self._mesh)
         names = select_arrays(found, arrays, interpolate)
         wanted = list(dict.fromkeys([*names, "Depth", "Position"]))
-        origins, directions, ring, azimuth = lidar.rays()
+        _, directions, ring, azimuth = lidar.rays()
         buffers, _ = self._cast_rays(
-            origins, directions, wanted, lidar.min_range, lidar.max_range, False, {"threads": threads}
+            lidar.position,
+            directions,
+            wanted,
+            lidar.min_range,
+            lidar.max_range,
+            False,
+            {"threads": threads},
+            sweep_rows=len(lidar.elevations),
         )
         ranges = buffers["Depth"].astype(np.float64)
         hit = np.isfinite(ranges)
@@ -619,9 +628,10 @@ class Scene:
         tmax: float,
         backface_culling: bool,
         options: dict,
+        sweep_rows: int = 0,
     ) -> tuple[dict[str, np.ndarray], tuple[int, ...]]:
         """The output arrays ``names`` (image names: Depth is t) of arbitrary rays, one row
-        per ray, and the batch shape."""
+        per ray, and the batch shape (``sweep_rows``: see _ray_request)."""
         precision = options.get("precision", "float64")
         request, shape, (k, j) = self._ray_request(
             origins,
@@ -633,9 +643,10 @@ class Scene:
             options.get("accel", "bvh"),
             options.get("threads"),
             backface_culling,
+            sweep_rows,
         )
         found = mesh_arrays(self._mesh)
-        buffers = allocate(found, names, request.origins.shape[0], _precision(precision), self._outputs)
+        buffers = allocate(found, names, request.directions.shape[0], _precision(precision), self._outputs)
         request_outputs(request, self._mesh, found, buffers)
         _core.cast(self._core, request)
         if "Depth" in names:
@@ -807,12 +818,20 @@ class Scene:
         accel: str,
         threads: int | None,
         backface_culling: bool,
+        sweep_rows: int = 0,
     ) -> tuple[_core.Request, tuple[int, ...], tuple[int, int | np.ndarray]]:
         """The request for rays (checked, in the core's units), the batch shape, and the
-        shifts k (lengths) and j (directions): t in the core is 2**(k - j) t."""
+        shifts k (lengths) and j (directions): t in the core is 2**(k - j) t. With
+        ``sweep_rows``, a sensor's sweep: one origin (3,) and (n, 3) unit directions, row
+        after row (the core traces them in bundles)."""
         if not self.has_bvh and _accel(accel) != "none":
             raise ValueError('this scene was built with bvh=False: intersect needs accel="none" (or bvh=True)')
-        o, d, shape, (o_min, o_max, d_min, d_max) = _ray_batch(origins, directions, _threads(threads))
+        if sweep_rows:
+            o, d = np.asarray(origins, dtype=np.float64).reshape(1, 3), directions
+            shape = (len(d),)
+            o_min, o_max, d_min, d_max = float(o.min()), float(o.max()), 0.5, 1.0  # (unit directions)
+        else:
+            o, d, shape, (o_min, o_max, d_min, d_max) = _ray_batch(origins, directions, _threads(threads))
         tmin, tmax = float(tmin), float(tmax)
         if math.isnan(tmin) or math.isnan(tmax) or tmin > tmax:
             raise ValueError(f"need tmin <= tmax, got tmin={tmin}, tmax={tmax}")
@@ -827,6 +846,7 @@ class Scene:
         request = self._request(strategy, precision, accel, threads, backface_culling)
         request.origins = np.ldexp(o, k) if k else o
         request.directions = np.ldexp(d, np.reshape(j, (-1, 1))) if np.any(j) else d
+        request.sweep_rows = sweep_rows
         if np.ndim(j) == 0:  # (else the bounds are 0 and inf, the same in any unit)
             request.tmin, request.tmax = _shifted(tmin, k - j), _shifted(tmax, k - j)
         return request, shape, (k, j)

@@ -1,6 +1,7 @@
 """Sensors beyond the pinhole: a 360-degree equirectangular panorama and a spinning lidar.
-Both are sets of rays from one point, cast through Scene's arbitrary-ray path (exact, as
-:meth:`Scene.intersect`); their directions have unit length, so t is the distance."""
+Both are grids of rays from one point (rows of equal elevation), which the core traces in
+bundles, with the answers of :meth:`Scene.intersect` on the same rays; their directions
+have unit length, so t is the distance."""
 
 from __future__ import annotations
 
@@ -27,11 +28,14 @@ def _frame(forward: Any, up: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return f, left, np.cross(f, left)
 
 
-def _directions(f, left, up, azimuth: np.ndarray, elevation: np.ndarray) -> np.ndarray:
-    """Unit directions at ``azimuth`` (radians, counter-clockwise from forward seen from
-    above, towards left) and ``elevation`` (radians above the horizontal plane)."""
-    c = np.cos(elevation)[:, None]
-    return c * (np.cos(azimuth)[:, None] * f + np.sin(azimuth)[:, None] * left) + np.sin(elevation)[:, None] * up
+def _directions(f, left, up, azimuths: np.ndarray, elevations: np.ndarray) -> np.ndarray:
+    """Unit directions ``(len(elevations) * len(azimuths), 3)``, row after row of equal
+    elevation, at ``azimuths`` (radians, counter-clockwise from forward seen from above,
+    towards left) and ``elevations`` (radians above the horizontal plane): trigonometry on
+    the two axes alone, the grid by broadcasting."""
+    horizontal = np.cos(azimuths)[:, None] * f + np.sin(azimuths)[:, None] * left
+    grid = np.cos(elevations)[:, None, None] * horizontal + (np.sin(elevations)[:, None] * up)[:, None, :]
+    return grid.reshape(-1, 3)
 
 
 def _point(value: Any, name: str) -> np.ndarray:
@@ -78,11 +82,9 @@ class Panorama:
 
     def rays(self) -> tuple[np.ndarray, np.ndarray]:
         """Origins and unit directions ``(nx * ny, 3)``, pixel ``(i, r)`` at ``i + r * nx``."""
-        i = np.tile(np.arange(self.nx), self.ny)
-        r = np.repeat(np.arange(self.ny), self.nx)
-        azimuth = 2 * np.pi * (i + 0.5) / self.nx - np.pi
-        elevation = np.pi * (r + 0.5) / self.ny - np.pi / 2
-        directions = _directions(*self._axes, azimuth, elevation)
+        azimuths = 2 * np.pi * (np.arange(self.nx) + 0.5) / self.nx - np.pi
+        elevations = np.pi * (np.arange(self.ny) + 0.5) / self.ny - np.pi / 2
+        directions = _directions(*self._axes, azimuths, elevations)
         return np.broadcast_to(self.eye, directions.shape), directions
 
 
@@ -129,7 +131,8 @@ class Lidar:
     def rays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Origins, unit directions ``(rings * steps, 3)`` (beam ``a`` of ring ``e`` at
         ``a + e * steps``), and each beam's ring and azimuth (degrees)."""
+        azimuths = np.arange(self.azimuth_steps) * (360.0 / self.azimuth_steps)
+        directions = _directions(*self._axes, np.radians(azimuths), np.radians(self.elevations))
         ring = np.repeat(np.arange(len(self.elevations)), self.azimuth_steps)
-        azimuth = np.tile(np.arange(self.azimuth_steps) * (360.0 / self.azimuth_steps), len(self.elevations))
-        directions = _directions(*self._axes, np.radians(azimuth), np.radians(self.elevations[ring]))
+        azimuth = np.tile(azimuths, len(self.elevations))
         return np.broadcast_to(self.position, directions.shape), directions, ring, azimuth

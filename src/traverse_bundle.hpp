@@ -1,0 +1,359 @@
+// Rays from one point in a grid: a lidar's rings x azimuth steps, a panorama's rows x
+// columns. Neighbouring rays of such a sweep meet the same nodes, so a tile of them goes
+// through the wide BVH as one bundle: the planes through the common origin that enclose
+// the bundle's rays (found from the rays themselves) cull a node once for all of them, and
+// a leaf's triangle is tested only on the rays whose central projection falls in the
+// triangle's projected rectangle. The test is the per-ray one (test_triangle) with the
+// exact watertight kernel, so every answer is trace_ray's. Frustum culling of ray packets
+// follows Reshetov, Soupikov and Hurley, "Multi-level ray tracing algorithm" (SIGGRAPH 2005).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <optional>
+
+#include "kernel_watertight.hpp"
+#include "traverse.hpp"
+#include "triangle_filter.hpp"
+#include "traverse_wide.hpp"
+
+namespace vrc {
+
+/// Rays from one origin with directions from an array, ray k = column + row * cols: row
+/// r, column c of a rows x cols grid whose neighbours point in neighbouring directions.
+class SweepRays {
+   public:
+    SweepRays(const double* origin, const double* directions, int64_t rows, int64_t cols, double tmin, double tmax)
+        : o_(origin), d_(directions), rows_(rows), cols_(cols), tmin_(tmin), tmax_(tmax) {
+        // Tiles about as wide as tall in angle: a lidar's rings lie farther apart than its
+        // azimuth steps.
+        const double across_row = turn(rows / 2, cols / 2, 0, 1), across_column = turn(rows / 2, cols / 2, 1, 0);
+        int64_t tile_rows = 1;
+        while (tile_rows < kTileRays && tile_rows * tile_rows * across_column < kTileRays * across_row) tile_rows *= 2;
+        tile_rows_ = std::min(tile_rows, rows);
+        tile_cols_ = std::min(kTileRays / tile_rows, cols);
+    }
+    [[nodiscard]] std::size_t size() const { return std::size_t(rows_ * cols_); }
+    [[nodiscard]] Ray ray(std::size_t k) const {
+        Ray ray;
+        for (int a = 0; a < 3; ++a) {
+            ray.org[a] = o_[a];
+            ray.dir[a] = d_[3 * k + a];
+        }
+        ray.tmin = tmin_;
+        ray.tmax = tmax_;
+        ray.normalize_direction();
+        return ray;
+    }
+    [[nodiscard]] const double* origin() const { return o_; }
+    [[nodiscard]] int64_t cols() const { return cols_; }
+
+    /// A tile's rows r0..r1 and columns c0..c1 (inclusive).
+    struct TileRays {
+        int64_t r0, r1, c0, c1;
+    };
+    static constexpr int64_t kTileRays = 256;
+    [[nodiscard]] std::size_t n_tiles() const { return std::size_t(tiles_x() * ((rows_ + tile_rows_ - 1) / tile_rows_)); }
+    [[nodiscard]] TileRays tile_rays(std::size_t tile) const {
+        const int64_t c0 = int64_t(tile) % tiles_x() * tile_cols_, r0 = int64_t(tile) / tiles_x() * tile_rows_;
+        return {r0, std::min(r0 + tile_rows_, rows_) - 1, c0, std::min(c0 + tile_cols_, cols_) - 1};
+    }
+    template <class F>
+    void for_each_in_tile(std::size_t tile, F&& f) const {
+        const TileRays t = tile_rays(tile);
+        for (int64_t r = t.r0; r <= t.r1; ++r)
+            for (int64_t c = t.c0; c <= t.c1; ++c) f(std::size_t(c + r * cols_));
+    }
+    [[nodiscard]] bool tile_may_hit(std::size_t) const { return true; }
+
+   private:
+    [[nodiscard]] int64_t tiles_x() const { return (cols_ + tile_cols_ - 1) / tile_cols_; }
+    /// The angle (about) between the unit directions of ray (r, c) and ray (r + dr, c + dc).
+    [[nodiscard]] double turn(int64_t r, int64_t c, int64_t dr, int64_t dc) const {
+        if (r + dr >= rows_ || c + dc >= cols_) return HUGE_VAL;
+        const double* a = d_ + 3 * (c + r * cols_);
+        const double* b = d_ + 3 * (c + dc + (r + dr) * cols_);
+        const double la = std::sqrt(dot(a, a)), lb = std::sqrt(dot(b, b));
+        double s = 0;
+        for (int k = 0; k < 3; ++k) s += std::fabs(a[k] / la - b[k] / lb);
+        return s;
+    }
+    const double *o_, *d_;
+    int64_t rows_, cols_, tile_rows_ = 1, tile_cols_ = 1;
+    double tmin_, tmax_;
+};
+
+/// Traces tiles of a sweep as bundles (see the top of this file). One per worker.
+template <template <class> class KernelT, class Real>
+class BundleTracer {
+    using Kernel = KernelT<Real>;
+    static constexpr int kMaxRays = int(SweepRays::kTileRays);
+    static constexpr int kBlock = 8;  ///< rays of a row tested against a triangle's rectangle together
+    struct Rect {
+        double a0 = HUGE_VAL, a1 = -HUGE_VAL, b0 = HUGE_VAL, b1 = -HUGE_VAL;
+        void grow(double a, double b) { a0 = std::min(a0, a), a1 = std::max(a1, a), b0 = std::min(b0, b), b1 = std::max(b1, b); }
+        [[nodiscard]] bool meets(const Rect& o) const { return a0 <= o.a1 && o.a0 <= a1 && b0 <= o.b1 && o.b0 <= b1; }
+    };
+
+   public:
+    BundleTracer(const Scene& scene, const SweepRays& rays, const CastContext& context)
+        : scene_(scene), rays_(rays), context_(context) {
+        for (int k = 0; k < 3; ++k) origin_[k] = rays.origin()[k] - scene.anchor[k];
+        for (int k = 0; k < 3; ++k)
+            reach_ = std::max({reach_, std::fabs(double(scene.bounds.lo[k])), std::fabs(double(scene.bounds.hi[k]))});
+        reach_ += std::max({std::fabs(origin_[0]), std::fabs(origin_[1]), std::fabs(origin_[2])});
+    }
+    BundleTracer(const BundleTracer&) = delete;  // (kernels point into ray_)
+
+    /// Traces tile `tile` and writes each ray's closest hit with store(k, ray, hit).
+    template <class Store>
+    void trace(std::size_t tile, const Store& store) {
+        const SweepRays::TileRays t = rays_.tile_rays(tile);
+        rows_ = int(t.r1 - t.r0 + 1), cols_ = int(t.c1 - t.c0 + 1), n_ = rows_ * cols_;
+        for (int j = 0; j < n_; ++j) {
+            index_[j] = std::size_t(t.c0 + j % cols_ + (t.r0 + j / cols_) * rays_.cols());
+            ray_[j] = rays_.ray(index_[j]);
+            hit_[j] = Hit<Real>{};
+            bound_[j] = ray_[j].tmax;
+        }
+        if (scene_.wide.empty()) {
+            for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], hit_[j]);
+            return;
+        }
+        if (!enclose()) {  // a bundle too wide to project: ray by ray
+            for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], trace_ray<KernelT, Real>(scene_, ray_[j], context_));
+            return;
+        }
+        for (int j = 0; j < n_; ++j) {
+            kernel_[j].emplace(ray_[j], context_);
+            filter_[j].emplace(ray_[j], kernel_[j]->shear());
+        }
+        traverse();
+        for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], hit_[j]);
+    }
+
+   private:
+    /// Finds the bundle's axis c, its cross axes p, q and each ray's projection (a, b) =
+    /// (d.p, d.q) / d.c onto the plane at distance 1 along c, with the rectangles of rows
+    /// and blocks, and the blocks' far bounds. False when some ray turns too far from c for
+    /// the projection (beyond about 80 degrees).
+    bool enclose() {
+        const double* mid = ray_[n_ / 2].dir;
+        const double* last = ray_[(n_ / 2 / cols_) * cols_ + cols_ - 1].dir;  // the middle row's last ray
+        const double* first = ray_[(n_ / 2 / cols_) * cols_].dir;
+        const double lm = std::sqrt(dot(mid, mid));
+        for (int k = 0; k < 3; ++k) c_[k] = mid[k] / lm;
+        double along[3] = {last[0] - first[0], last[1] - first[1], last[2] - first[2]};
+        if (cols_ == 1) along[0] = c_[1], along[1] = -c_[2], along[2] = c_[0];  // any direction not c
+        if (!orthonormal(along, c_, p_)) {
+            const double other[3] = {c_[1] + c_[2], c_[2] - c_[0], -c_[0] - c_[1]};
+            if (!orthonormal(other, c_, p_)) return false;
+        }
+        cross(c_, p_, q_);
+        all_ = Rect{};
+        for (int r = 0; r < rows_; ++r) {
+            rows_rect_[r] = Rect{};
+            for (int j = r * cols_; j < (r + 1) * cols_; ++j) {
+                const double* d = ray_[j].dir;
+                w_[j] = dot(d, c_);
+                if (!(w_[j] > 0.17 * std::sqrt(dot(d, d)))) return false;
+                a_[j] = dot(d, p_) / w_[j], b_[j] = dot(d, q_) / w_[j];
+                if ((j - r * cols_) % kBlock == 0) blocks_[block(j)] = Rect{};
+                blocks_[block(j)].grow(a_[j], b_[j]);
+                rows_rect_[r].grow(a_[j], b_[j]);
+            }
+            all_.a0 = std::min(all_.a0, rows_rect_[r].a0), all_.a1 = std::max(all_.a1, rows_rect_[r].a1);
+            all_.b0 = std::min(all_.b0, rows_rect_[r].b0), all_.b1 = std::max(all_.b1, rows_rect_[r].b1);
+        }
+        const double* axis[3] = {c_, p_, q_};
+        for (int i = 0; i < 3; ++i) axes_[i].set(axis[i], origin_, reach_);
+        for (int b = 0; b < rows_ * blocks_per_row(); ++b) update_block(b);
+        return true;
+    }
+
+    /// Unit vector u along v's part orthogonal to the unit vector c; false when none.
+    static bool orthonormal(const double v[3], const double c[3], double u[3]) {
+        const double along = dot(v, c);
+        for (int k = 0; k < 3; ++k) u[k] = v[k] - along * c[k];
+        const double l = std::sqrt(dot(u, u));
+        if (!(l > 1e-6 * std::sqrt(dot(v, v)))) return false;
+        for (int k = 0; k < 3; ++k) u[k] /= l;
+        return true;
+    }
+    static void cross(const double a[3], const double b[3], double out[3]) {
+        out[0] = a[1] * b[2] - a[2] * b[1], out[1] = a[2] * b[0] - a[0] * b[2], out[2] = a[0] * b[1] - a[1] * b[0];
+    }
+    [[nodiscard]] int block(int j) const { return j / cols_ * blocks_per_row() + j % cols_ / kBlock; }
+    [[nodiscard]] int blocks_per_row() const { return (cols_ + kBlock - 1) / kBlock; }
+
+    /// An axis n (c, p or q) on eight boxes at once in float: n.x at each box's corners
+    /// least and most along n. Relative to the origin, n.(x - o), they are bounded by
+    /// those minus n.o and `slack`, which covers the float roundings (of n, the products
+    /// and sums, for boxes within `reach` of the anchor).
+    struct LaneAxis {
+        Lane8 n[3];
+        int least_row[3], most_row[3];  // the bounds rows of those corners: lo (0..2) or hi (3..5)
+        double n_o = 0, slack = 0;
+        void set(const double axis[3], const double origin[3], double reach) {
+            n_o = 0;
+            double size = 0;
+            for (int k = 0; k < 3; ++k) {
+                n[k] = lanes_set(static_cast<float>(axis[k]));
+                least_row[k] = axis[k] >= 0 ? k : 3 + k;
+                most_row[k] = axis[k] >= 0 ? 3 + k : k;
+                n_o += axis[k] * origin[k];
+                size += std::fabs(axis[k]);
+            }
+            slack = 1e-6 * size * reach;
+        }
+        [[gnu::always_inline]] Lane8 at(const WideNode& node, const int row[3]) const {
+            return lanes_add(lanes_add(lanes_mul(n[0], lanes_load(node.bounds[row[0]])),
+                                       lanes_mul(n[1], lanes_load(node.bounds[row[1]]))),
+                             lanes_mul(n[2], lanes_load(node.bounds[row[2]])));
+        }
+        /// Bounds of n.(x - o) over the box whose least and most n.x are given.
+        [[nodiscard]] double low(float least) const { return double(least) - n_o - slack; }
+        [[nodiscard]] double high(float most) const { return double(most) - n_o + slack; }
+    };
+
+    /// Block b's far bound: the greatest distance along c its rays still search to.
+    void update_block(int b) {
+        const int r = b / blocks_per_row(), j0 = r * cols_ + b % blocks_per_row() * kBlock;
+        double far = 0;
+        for (int j = j0, end = std::min(j0 + kBlock, (r + 1) * cols_); j < end; ++j) far = std::max(far, bound_[j] * w_[j]);
+        block_far_[b] = far * (1 + 1e-9);  // (above the rounding of the product)
+        far = 0;
+        for (int i = 0; i < rows_ * blocks_per_row(); ++i) far = std::max(far, block_far_[i]);
+        far_ = far;
+        far_limit_ = std::isinf(far) ? HUGE_VALF : round_up(far + axes_[0].n_o + axes_[0].slack);
+    }
+
+    /// Whether some block's rays may meet a box projecting into `rect` at distances along
+    /// c from `nearest` on.
+    [[nodiscard]] bool any_block_meets(const Rect& rect, double nearest) const {
+        if (!rect.meets(all_)) return false;
+        for (int r = 0; r < rows_; ++r) {
+            if (!rows_rect_[r].meets(rect)) continue;
+            for (int b = r * blocks_per_row(); b < (r + 1) * blocks_per_row(); ++b)
+                if (block_far_[b] >= nearest && blocks_[b].meets(rect)) return true;
+        }
+        return false;
+    }
+
+    /// The projection of box lane `c` (its least and most along c, p, q in `extent`) onto
+    /// the plane w = 1, and its least distance w along c. The rays meet only points with
+    /// w >= 0: a box wholly behind gives an empty rectangle; one reaching across w = 0
+    /// bounds a = u / w only on the sides where u keeps its sign.
+    Rect project(const float extent[6][WideNode::kWidth], int c, double& nearest) const {
+        const double w0 = axes_[0].low(extent[0][c]), w1 = axes_[0].high(extent[1][c]);
+        nearest = w0;
+        if (w1 < 0) return Rect{};
+        const double u0 = axes_[1].low(extent[2][c]), u1 = axes_[1].high(extent[3][c]);
+        const double v0 = axes_[2].low(extent[4][c]), v1 = axes_[2].high(extent[5][c]);
+        // u / w over the box lies between these quotients; 1e-12 covers their rounding.
+        const double s = 1e-12;
+        if (w0 > 0)
+            return Rect{std::min(u0 / w0, u0 / w1) - s, std::max(u1 / w0, u1 / w1) + s,
+                        std::min(v0 / w0, v0 / w1) - s, std::max(v1 / w0, v1 / w1) + s};
+        return Rect{u0 > 0 ? u0 / w1 - s : -HUGE_VAL, u1 < 0 ? u1 / w1 + s : HUGE_VAL, v0 > 0 ? v0 / w1 - s : -HUGE_VAL,
+                    v1 < 0 ? v1 / w1 + s : HUGE_VAL};
+    }
+
+    void traverse() {
+        struct Pending {
+            uint32_t child, count;
+            float near;
+            double nearest;  // (a leaf's: its least distance along c, and its projection)
+            Rect rect;
+        };
+        Pending stack[WideNode::kWidth * 128];
+        int top = 0;
+        stack[top++] = {0, 0, -HUGE_VALF, 0, Rect{}};
+        while (top > 0) {
+            const Pending e = stack[--top];
+            if (e.near > far_limit_) continue;
+            if (e.count) {
+                leaf(e.child, e.count, e.rect, e.nearest);
+                continue;
+            }
+            const WideNode& node = scene_.wide[e.child];
+            alignas(32) float extent[6][WideNode::kWidth];
+            const Lane8 near = axes_[0].at(node, axes_[0].least_row);
+            unsigned mask = lanes_le(lanes_load(node.bounds[0]), lanes_load(node.bounds[3]));  // (empty lanes)
+            mask &= lanes_le(near, lanes_set(far_limit_));
+            if (!mask) continue;
+            lanes_store(extent[0], near);
+            lanes_store(extent[1], axes_[0].at(node, axes_[0].most_row));
+            for (int i = 1; i < 3; ++i) {
+                lanes_store(extent[2 * i], axes_[i].at(node, axes_[i].least_row));
+                lanes_store(extent[2 * i + 1], axes_[i].at(node, axes_[i].most_row));
+            }
+            int order[WideNode::kWidth], n = 0;
+            Rect rects[WideNode::kWidth];
+            double nearest[WideNode::kWidth];
+            for (; mask; mask &= mask - 1) {  // farthest first, so the nearest is popped first
+                const int c = __builtin_ctz(mask);
+                rects[c] = project(extent, c, nearest[c]);
+                if (!any_block_meets(rects[c], nearest[c])) continue;
+                int at = n++;
+                for (; at > 0 && extent[0][order[at - 1]] < extent[0][c]; --at) order[at] = order[at - 1];
+                order[at] = c;
+            }
+            for (int i = 0; i < n; ++i) {
+                const int c = order[i];
+                if (node.count[c] == 0) {
+                    const char* next = reinterpret_cast<const char*>(&scene_.wide[node.child[c]]);
+                    for (int line = 0; line < 4; ++line) __builtin_prefetch(next + 64 * line);
+                }
+                stack[top++] = {node.child[c], node.count[c], extent[0][c], nearest[c], rects[c]};
+            }
+        }
+    }
+
+    /// Tests leaf triangles first .. first + count - 1 on the rays that may meet its box
+    /// (projecting into `rect`, from `nearest` along c on), each ray's triangles four at a
+    /// time through its filter, as a single ray's leaf (traverse_wide.hpp).
+    void leaf(uint32_t first, uint32_t count, const Rect& rect, double nearest) {
+        for (int r = 0; r < rows_; ++r) {
+            if (!rows_rect_[r].meets(rect)) continue;
+            for (int b = r * blocks_per_row(); b < (r + 1) * blocks_per_row(); ++b) {
+                if (block_far_[b] < nearest || !blocks_[b].meets(rect)) continue;
+                bool closer = false;
+                const int j0 = r * cols_ + (b - r * blocks_per_row()) * kBlock;
+                for (int j = j0, end = std::min(j0 + kBlock, (r + 1) * cols_); j < end; ++j) {
+                    if (a_[j] < rect.a0 || a_[j] > rect.a1 || b_[j] < rect.b0 || b_[j] > rect.b1) continue;
+                    if (bound_[j] * w_[j] < nearest) continue;
+                    const double before = bound_[j], tmin = ray_[j].tmin;
+                    for (uint32_t i = first, last = first + count; i < last; i += 4)
+                        for (unsigned m = filter_[j]->candidates(scene_, i, std::min(4u, last - i), tmin, bound_[j]); m;
+                             m &= m - 1)
+                            test_triangle(*kernel_[j], scene_, i + __builtin_ctz(m), tmin, bound_[j], hit_[j]);
+                    closer |= bound_[j] != before;
+                }
+                if (closer) update_block(b);
+            }
+        }
+    }
+
+    const Scene& scene_;
+    const SweepRays& rays_;
+    const CastContext& context_;
+    double origin_[3];  ///< the rays' origin relative to the scene's anchor
+    double reach_ = 0;  ///< a bound on |coordinates| relative to the anchor of boxes and origin
+    int rows_ = 0, cols_ = 0, n_ = 0;
+    double c_[3], p_[3], q_[3];
+    LaneAxis axes_[3];  ///< c, p, q
+    double far_ = HUGE_VAL;  ///< the greatest of the blocks' far bounds
+    float far_limit_ = HUGE_VALF;  ///< boxes whose least c.x (float) lies beyond this are beyond far_
+    Rect all_, rows_rect_[kMaxRays], blocks_[kMaxRays];
+    double block_far_[kMaxRays];
+    std::size_t index_[kMaxRays];
+    Ray ray_[kMaxRays];
+    std::optional<Kernel> kernel_[kMaxRays];
+    std::optional<TriangleFilter> filter_[kMaxRays];
+    Hit<Real> hit_[kMaxRays];
+    double bound_[kMaxRays], w_[kMaxRays], a_[kMaxRays], b_[kMaxRays];
+};
+
+}  // namespace vrc
