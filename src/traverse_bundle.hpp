@@ -125,12 +125,20 @@ class BundleTracer {
             for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], trace_ray<KernelT, Real>(scene_, ray_[j], context_));
             return;
         }
-        for (int j = 0; j < n_; ++j) {
-            kernel_[j].emplace(ray_[j], context_);
-            filter_[j].emplace(ray_[j], kernel_[j]->shear());
-        }
+        std::fill_n(ready_, n_, false);
         traverse();
-        for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], hit_[j]);
+        for (int r = 0; r < rows_; ++r) {  // hits one by one, runs of misses at once
+            for (int j = r * cols_, end = (r + 1) * cols_; j < end;) {
+                if (hit_[j].found()) {
+                    store(index_[j], ray_[j], hit_[j]);
+                    ++j;
+                    continue;
+                }
+                const int run = j;
+                while (j < end && !hit_[j].found()) ++j;
+                store.misses(index_[run], std::size_t(j - run));
+            }
+        }
     }
 
    private:
@@ -156,9 +164,10 @@ class BundleTracer {
             rows_rect_[r] = Rect{};
             for (int j = r * cols_; j < (r + 1) * cols_; ++j) {
                 const double* d = ray_[j].dir;
-                w_[j] = dot(d, c_);
-                if (!(w_[j] > 0.17 * std::sqrt(dot(d, d)))) return false;
-                a_[j] = dot(d, p_) / w_[j], b_[j] = dot(d, q_) / w_[j];
+                const double w = w_[j] = dot(d, c_);
+                if (!(w > 0 && w * w > 0.03 * dot(d, d))) return false;
+                const double inverse = 1 / w;
+                a_[j] = dot(d, p_) * inverse, b_[j] = dot(d, q_) * inverse;
                 if ((j - r * cols_) % kBlock == 0) blocks_[block(j)] = Rect{};
                 blocks_[block(j)].grow(a_[j], b_[j]);
                 rows_rect_[r].grow(a_[j], b_[j]);
@@ -324,6 +333,11 @@ class BundleTracer {
                 for (int j = j0, end = std::min(j0 + kBlock, (r + 1) * cols_); j < end; ++j) {
                     if (a_[j] < rect.a0 || a_[j] > rect.a1 || b_[j] < rect.b0 || b_[j] > rect.b1) continue;
                     if (bound_[j] * w_[j] < nearest) continue;
+                    if (!ready_[j]) {  // (most rays of a sweep meet few leaves, many none)
+                        kernel_[j].emplace(ray_[j], context_);
+                        filter_[j].emplace(ray_[j], kernel_[j]->shear());
+                        ready_[j] = true;
+                    }
                     const double before = bound_[j], tmin = ray_[j].tmin;
                     for (uint32_t i = first, last = first + count; i < last; i += 4)
                         for (unsigned m = filter_[j]->candidates(scene_, i, std::min(4u, last - i), tmin, bound_[j]); m;
@@ -352,6 +366,7 @@ class BundleTracer {
     Ray ray_[kMaxRays];
     std::optional<Kernel> kernel_[kMaxRays];
     std::optional<TriangleFilter> filter_[kMaxRays];
+    bool ready_[kMaxRays];  ///< whether ray j's kernel and filter are made
     Hit<Real> hit_[kMaxRays];
     double bound_[kMaxRays], w_[kMaxRays], a_[kMaxRays], b_[kMaxRays];
 };
