@@ -7,7 +7,7 @@ ratios where separate runs minutes apart cannot resolve it.
     (change the core)
     pip install --no-build-isolation --no-deps . --target /tmp/after -Cbuild-dir=/tmp/build-after
     python benchmarks/compare_builds.py /tmp/before /tmp/after [--rounds 60] [--threads 2]
-        [--scene frog|channels|terrain|bumpy|small] [--view framed|close|full] [--flat] [--pixels 1024]
+        [--scene frog|channels|terrain|bumpy|small] [--view framed|close|full|lidar] [--flat] [--pixels 1024]
         [--arrays ids|geometry|default] [--cold]
 
 Each directory holds an installed ``vtkraycast``. Each build runs in its own process (two
@@ -21,7 +21,8 @@ round by round. The frog, channels and terrain scenes and their views are benchm
 ``Scene.cast`` a user calls, with ``--arrays``: TriangleId alone (``ids``, the default), the
 default geometry (``geometry``: interpolate=False), the defaults with the mesh's arrays
 (``default``), or the arrays named (``Depth,Elevation``). Builds are compared by the first
-array cast. ``--cold`` writes over 64 MB before each cast, as another caster run in
+array cast. ``--view lidar`` times ``Scene.scan`` of benchmarks/sensors.py's 64 x 2048
+lidar instead, comparing range images. ``--cold`` writes over 64 MB before each cast, as another caster run in
 between would (peers.py's alternated pairs), so the cast finds its scene out of cache.
 """
 
@@ -55,14 +56,17 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
         camera = vrc.Camera((0, 0, 2.0), (0, 0, 0), (0, 1, 0), view_angle=158.3, nx=n, ny=n)
     else:
         import scenes
+        import sensors
 
         mesh = scenes.SCENES[args.scene]()
-        camera = scenes.view(mesh, args.view, n)
+        camera = sensors.scene_lidar(mesh, args.scene) if args.view == "lidar" else scenes.view(mesh, args.view, n)
     scene = vrc.Scene(mesh, threads=args.threads, bvh=not args.flat)
     options = ARRAYS[args.arrays] if args.arrays in ARRAYS else {"arrays": args.arrays.split(",")}
     compared = options.get("arrays", ["TriangleId"])[0]
 
     def cast() -> np.ndarray:
+        if args.view == "lidar":
+            return scene.scan(camera, range_image=True, threads=args.threads)[1]
         return np.asarray(scene.cast(camera, threads=args.threads, **options)[compared])
 
     cold = args.cold
@@ -82,7 +86,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=60)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--scene", choices=["frog", "channels", "terrain", "bumpy", "small"], default="frog")
-    parser.add_argument("--view", choices=["framed", "close", "full"], default="framed")
+    parser.add_argument("--view", choices=["framed", "close", "full", "lidar"], default="framed")
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")
     parser.add_argument("--pixels", type=int, default=1024)
     parser.add_argument(
@@ -111,16 +115,17 @@ def main() -> None:
 
     first = [cast(k)[1] for k in range(len(pipes))]
     for k in range(len(pipes)):
-        if not np.array_equal(first[k], first[0]):
+        if not np.array_equal(first[k], first[0], equal_nan=True):
             sys.exit(f"{args.builds[k]} casts a different image from {args.builds[0]}")
     times = np.array([[cast(k)[0] for k in range(len(pipes))] for _ in range(args.rounds)])
     for pipe, child in zip(pipes, children):
         pipe.send(False)
         child.join()
     n = args.pixels
+    what = "64 x 2048 beams, scan's arrays" if args.view == "lidar" else f"{n}x{n}, arrays: {args.arrays}"
     print(
-        f"{args.scene} ({args.view}){' (flat)' if args.flat else ''}, {n}x{n}, {args.threads} threads, "
-        f"{args.rounds} rounds, arrays: {args.arrays}" + (", 64 MB written over before each cast" if args.cold else "")
+        f"{args.scene} ({args.view}){' (flat)' if args.flat else ''}, {what}, {args.threads} threads, "
+        f"{args.rounds} rounds" + (", 64 MB written over before each cast" if args.cold else "")
     )
     for k, build in enumerate(args.builds):
         ratio = times[:, k] / times[:, 0]

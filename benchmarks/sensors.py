@@ -26,6 +26,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 import scenes
 from timing import alternated_ratio
 
+ELEVATIONS = np.linspace(-25, 15, 64)
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -33,19 +35,23 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=2048)
     parser.add_argument("--pairs", type=int, default=7)
     args = parser.parse_args()
-    elevations = np.linspace(-25, 15, args.rings)
+    elevations = np.linspace(ELEVATIONS[0], ELEVATIONS[-1], args.rings)
     print(f"{args.rings} rings x {args.steps} steps = {args.rings * args.steps:,} beams; "
           f"Open3D's time over vtkraycast's, median of {args.pairs} alternated pairs (quartiles)")  # fmt: skip
     for name in ("frog", "terrain"):
         compare(name, elevations, args)
 
 
+def scene_lidar(mesh, name: str, elevations: np.ndarray = ELEVATIONS, steps: int = 2048) -> vrc.Lidar:
+    """The lidar of scene ``name``: in the middle of its box (the terrain's 2 above it)."""
+    low, high = np.array(mesh.bounds[0::2]), np.array(mesh.bounds[1::2])
+    return vrc.Lidar((low + high) / 2 + (np.array([0, 0, 2.0]) if name == "terrain" else 0), elevations, steps)
+
+
 def compare(name: str, elevations: np.ndarray, args: argparse.Namespace) -> None:
     mesh = getattr(scenes, name)()
     scene = vrc.Scene(mesh)
-    low, high = np.array(mesh.bounds[0::2]), np.array(mesh.bounds[1::2])
-    position = (low + high) / 2 + (np.array([0, 0, 2.0]) if name == "terrain" else 0)
-    lidar = vrc.Lidar(position, elevations, args.steps)
+    lidar = scene_lidar(mesh, name, elevations, args.steps)
     peer = o3d.t.geometry.RaycastingScene()
     prepared = scene.prepared
     peer.add_triangles(o3d.core.Tensor(prepared.points.astype(np.float32)),

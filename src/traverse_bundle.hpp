@@ -314,6 +314,9 @@ class BundleTracer {
                 if (node.count[c] == 0) {
                     const char* next = reinterpret_cast<const char*>(&scene_.wide[node.child[c]]);
                     for (int line = 0; line < 4; ++line) __builtin_prefetch(next + 64 * line);
+                } else {  // a leaf's point indices (its points follow when it is popped)
+                    __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(node.child[c]));
+                    __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(node.child[c] + node.count[c]) - 1);
                 }
                 stack[top++] = {node.child[c], node.count[c], extent[0][c], nearest[c], rects[c]};
             }
@@ -324,29 +327,32 @@ class BundleTracer {
     /// (projecting into `rect`, from `nearest` along c on), each ray's triangles four at a
     /// time through its filter, as a single ray's leaf (traverse_wide.hpp).
     void leaf(uint32_t first, uint32_t count, const Rect& rect, double nearest) {
+        int n = 0;  // the rays to test (then the points are asked for: many leaves have none)
         for (int r = 0; r < rows_; ++r) {
             if (!rows_rect_[r].meets(rect)) continue;
             for (int b = r * blocks_per_row(); b < (r + 1) * blocks_per_row(); ++b) {
                 if (block_far_[b] < nearest || !blocks_[b].meets(rect)) continue;
-                bool closer = false;
                 const int j0 = r * cols_ + (b - r * blocks_per_row()) * kBlock;
-                for (int j = j0, end = std::min(j0 + kBlock, (r + 1) * cols_); j < end; ++j) {
-                    if (a_[j] < rect.a0 || a_[j] > rect.a1 || b_[j] < rect.b0 || b_[j] > rect.b1) continue;
-                    if (bound_[j] * w_[j] < nearest) continue;
-                    if (!ready_[j]) {  // (most rays of a sweep meet few leaves, many none)
-                        kernel_[j].emplace(ray_[j], context_);
-                        filter_[j].emplace(ray_[j], kernel_[j]->shear());
-                        ready_[j] = true;
-                    }
-                    const double before = bound_[j], tmin = ray_[j].tmin;
-                    for (uint32_t i = first, last = first + count; i < last; i += 4)
-                        for (unsigned m = filter_[j]->candidates(scene_, i, std::min(4u, last - i), tmin, bound_[j]); m;
-                             m &= m - 1)
-                            test_triangle(*kernel_[j], scene_, i + __builtin_ctz(m), tmin, bound_[j], hit_[j]);
-                    closer |= bound_[j] != before;
-                }
-                if (closer) update_block(b);
+                for (int j = j0, end = std::min(j0 + kBlock, (r + 1) * cols_); j < end; ++j)
+                    if (a_[j] >= rect.a0 && a_[j] <= rect.a1 && b_[j] >= rect.b0 && b_[j] <= rect.b1 &&
+                        bound_[j] * w_[j] >= nearest)
+                        candidates_[n++] = j;
             }
+        }
+        if (n == 0) return;
+        for (uint32_t i = first; i < first + count; ++i) scene_.prefetch_points(i);
+        for (int c = 0; c < n; ++c) {
+            const int j = candidates_[c];
+            if (!ready_[j]) {  // (most rays of a sweep meet few leaves, many none)
+                kernel_[j].emplace(ray_[j], context_);
+                filter_[j].emplace(ray_[j], kernel_[j]->shear());
+                ready_[j] = true;
+            }
+            const double before = bound_[j], tmin = ray_[j].tmin;
+            for (uint32_t i = first, last = first + count; i < last; i += 4)
+                for (unsigned m = filter_[j]->candidates(scene_, i, std::min(4u, last - i), tmin, bound_[j]); m; m &= m - 1)
+                    test_triangle(*kernel_[j], scene_, i + __builtin_ctz(m), tmin, bound_[j], hit_[j]);
+            if (bound_[j] != before) update_block(block(j));
         }
     }
 
@@ -367,6 +373,7 @@ class BundleTracer {
     std::optional<Kernel> kernel_[kMaxRays];
     std::optional<TriangleFilter> filter_[kMaxRays];
     bool ready_[kMaxRays];  ///< whether ray j's kernel and filter are made
+    int candidates_[kMaxRays];  ///< the rays a leaf is tested on
     Hit<Real> hit_[kMaxRays];
     double bound_[kMaxRays], w_[kMaxRays], a_[kMaxRays], b_[kMaxRays];
 };
