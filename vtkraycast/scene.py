@@ -384,15 +384,15 @@ class Scene:
             sweep_rows=len(lidar.elevations),
         )
         ranges = buffers["Depth"].astype(np.float64)
-        hit = np.isfinite(ranges)
-        cloud = pv.PolyData(np.ascontiguousarray(buffers["Position"][hit]))
-        cloud.point_data["Range"] = ranges[hit]
-        cloud.point_data["Elevation"] = lidar.elevations[ring[hit]]
-        cloud.point_data["Azimuth"] = azimuth[hit]
-        cloud.point_data["Ring"] = ring[hit].astype(np.int32)
+        beams = np.flatnonzero(np.isfinite(ranges))  # (take by index: a boolean mask on (n, 3) is 5x slower)
+        cloud = pv.PolyData(buffers["Position"].take(beams, axis=0))
+        cloud.point_data["Range"] = ranges.take(beams)
+        cloud.point_data["Elevation"] = lidar.elevations.take(ring.take(beams))
+        cloud.point_data["Azimuth"] = azimuth.take(beams)
+        cloud.point_data["Ring"] = ring.take(beams).astype(np.int32)
         for name in names:
             if name not in ("Depth", "Position", "vtkValidPointMask"):
-                cloud.point_data[name] = buffers[name][hit]
+                cloud.point_data[name] = buffers[name].take(beams, axis=0)
         if range_image:
             return cloud, ranges.reshape(len(lidar.elevations), lidar.azimuth_steps)
         return cloud
