@@ -125,7 +125,8 @@ class BundleTracer {
             for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], trace_ray<KernelT, Real>(scene_, ray_[j], context_));
             return;
         }
-        std::fill_n(ready_, n_, false);
+        for (int j = 0; j < n_; ++j) kernel_[j].reset(), filter_[j].reset();
+        std::fill_n(changed_, n_, false);
         traverse();
         for (int r = 0; r < rows_; ++r) {  // hits one by one, runs of misses at once
             for (int j = r * cols_, end = (r + 1) * cols_; j < end;) {
@@ -324,8 +325,7 @@ class BundleTracer {
     }
 
     /// Tests leaf triangles first .. first + count - 1 on the rays that may meet its box
-    /// (projecting into `rect`, from `nearest` along c on), each ray's triangles four at a
-    /// time through its filter, as a single ray's leaf (traverse_wide.hpp).
+    /// (projecting into `rect`, from `nearest` along c on).
     void leaf(uint32_t first, uint32_t count, const Rect& rect, double nearest) {
         int n = 0;  // the rays to test (then the points are asked for: many leaves have none)
         for (int r = 0; r < rows_; ++r) {
@@ -341,19 +341,77 @@ class BundleTracer {
         }
         if (n == 0) return;
         for (uint32_t i = first; i < first + count; ++i) scene_.prefetch_points(i);
+        if (n > kRaysByTriangle)
+            by_triangle(first, count, n);
+        else
+            by_ray(first, count, n);
+        for (int c = 0; c < n; ++c)
+            if (changed_[candidates_[c]]) changed_[candidates_[c]] = false, update_block(block(candidates_[c]));
+    }
+
+    /// Many rays in a leaf's box: each triangle is projected and tested on the candidates
+    /// in its own rectangle (the kernel alone: a hit needs its exact test anyway).
+    static constexpr int kRaysByTriangle = 4;
+    void by_triangle(uint32_t first, uint32_t count, int n) {
+        for (uint32_t i = first; i < first + count; ++i) {
+            const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
+            Rect rect;
+            double nearest = HUGE_VAL;
+            bool projects = true, behind = true;
+            for (int v = 0; v < 3; ++v) {
+                const double* point = scene_.point(tri[v]);
+                const double x[3] = {point[0] - rays_.origin()[0], point[1] - rays_.origin()[1], point[2] - rays_.origin()[2]};
+                const double w = dot(x, c_), size = std::fabs(x[0]) + std::fabs(x[1]) + std::fabs(x[2]);
+                nearest = std::min(nearest, w);
+                behind &= w < -1e-9 * size;
+                if (!(w > 0.125 * size)) {
+                    projects = false;
+                    continue;
+                }
+                const double inverse = 1 / w;
+                rect.grow(dot(x, p_) * inverse, dot(x, q_) * inverse);
+            }
+            if (behind) continue;  // (the rays meet points with w >= 0 only)
+            if (projects) {
+                // A hit point projects into the triangle's projection; the projections carry
+                // a few roundings of values below 9, and the hit's w is at least the least
+                // vertex's.
+                const double s = 1e-12;
+                rect.a0 -= s, rect.a1 += s, rect.b0 -= s, rect.b1 += s;
+                nearest *= 1 - 1e-9;
+            } else {
+                rect = Rect{-HUGE_VAL, HUGE_VAL, -HUGE_VAL, HUGE_VAL};
+                nearest = -HUGE_VAL;
+            }
+            for (int c = 0; c < n; ++c) {
+                const int j = candidates_[c];
+                if (a_[j] < rect.a0 || a_[j] > rect.a1 || b_[j] < rect.b0 || b_[j] > rect.b1 || bound_[j] * w_[j] < nearest)
+                    continue;
+                const double before = bound_[j];
+                test_triangle(kernel(j), scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
+                changed_[j] |= bound_[j] != before;
+            }
+        }
+    }
+
+    /// Few rays in a leaf's box: each ray's triangles four at a time through its filter,
+    /// as a single ray's leaf (traverse_wide.hpp).
+    void by_ray(uint32_t first, uint32_t count, int n) {
         for (int c = 0; c < n; ++c) {
             const int j = candidates_[c];
-            if (!ready_[j]) {  // (most rays of a sweep meet few leaves, many none)
-                kernel_[j].emplace(ray_[j], context_);
-                filter_[j].emplace(ray_[j], kernel_[j]->shear());
-                ready_[j] = true;
-            }
+            if (!filter_[j]) filter_[j].emplace(ray_[j], kernel(j).shear());
             const double before = bound_[j], tmin = ray_[j].tmin;
             for (uint32_t i = first, last = first + count; i < last; i += 4)
                 for (unsigned m = filter_[j]->candidates(scene_, i, std::min(4u, last - i), tmin, bound_[j]); m; m &= m - 1)
                     test_triangle(*kernel_[j], scene_, i + __builtin_ctz(m), tmin, bound_[j], hit_[j]);
-            if (bound_[j] != before) update_block(block(j));
+            changed_[j] |= bound_[j] != before;
         }
+    }
+
+    /// Ray j's kernel, made when first needed: most rays of a sweep meet few leaves, many none.
+    const Kernel& kernel(int j) {
+        if (!kernel_[j]) kernel_[j].emplace(ray_[j], context_);
+        return *kernel_[j];
     }
 
     const Scene& scene_;
@@ -372,7 +430,7 @@ class BundleTracer {
     Ray ray_[kMaxRays];
     std::optional<Kernel> kernel_[kMaxRays];
     std::optional<TriangleFilter> filter_[kMaxRays];
-    bool ready_[kMaxRays];  ///< whether ray j's kernel and filter are made
+    bool changed_[kMaxRays];  ///< whether ray j's bound came closer in the leaf
     int candidates_[kMaxRays];  ///< the rays a leaf is tested on
     Hit<Real> hit_[kMaxRays];
     double bound_[kMaxRays], w_[kMaxRays], a_[kMaxRays], b_[kMaxRays];

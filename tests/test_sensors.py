@@ -198,7 +198,11 @@ def _sweep_cases():
         bumpy_sphere(5, offset=1e6),
         vrc.Lidar((1e6 + 0.1, 1e6, 1e6 - 0.2), np.linspace(-40, 40, 24), 600),
     )
-    ranged = ("range limits", bumpy_sphere(5), vrc.Lidar((0.013, -0.021, 0.007), [-5, 0, 5, 10], 900, min_range=0.9, max_range=1.0))
+    ranged = (
+        "range limits",
+        bumpy_sphere(5),
+        vrc.Lidar((0.013, -0.021, 0.007), [-5, 0, 5, 10], 900, min_range=0.9, max_range=1.0),
+    )
     poles = ("wide tiles", bumpy_sphere(4), vrc.Lidar((0.21, -0.033, 0.017), [-90, -60, -20, 0, 20, 60, 90], 12))
     return [inside, outside, far, ranged, poles]
 
