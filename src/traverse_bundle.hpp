@@ -1,5 +1,6 @@
 // Rays from one point in a grid: a lidar's rings x azimuth steps, a panorama's rows x
-// columns. Neighbouring rays of such a sweep meet the same nodes, so a tile of them goes
+// columns, a camera of the caller's own (Scene.intersect with one origin and a 2-D batch
+// of directions). Neighbouring rays of such a sweep meet the same nodes, so a tile of them goes
 // through the wide BVH as one bundle: the planes through the common origin that enclose
 // the bundle's rays (found from the rays themselves) cull a node once for all of them, and
 // a leaf's triangle is tested only on the rays whose central projection falls in the
@@ -21,7 +22,8 @@
 namespace vrc {
 
 /// Rays from one origin with directions from an array, ray k = column + row * cols: row
-/// r, column c of a rows x cols grid whose neighbours point in neighbouring directions.
+/// r, column c of a rows x cols grid whose neighbours point in neighbouring directions
+/// (a tile where they do not goes ray by ray).
 class SweepRays {
    public:
     SweepRays(const double* origin, const double* directions, int64_t rows, int64_t cols, double tmin, double tmax)
@@ -93,6 +95,7 @@ class BundleTracer {
     struct Rect {
         double a0 = HUGE_VAL, a1 = -HUGE_VAL, b0 = HUGE_VAL, b1 = -HUGE_VAL;
         void grow(double a, double b) { a0 = std::min(a0, a), a1 = std::max(a1, a), b0 = std::min(b0, b), b1 = std::max(b1, b); }
+        [[nodiscard]] double area() const { return (a1 - a0) * (b1 - b0); }
         [[nodiscard]] bool meets(const Rect& o) const { return a0 <= o.a1 && o.a0 <= a1 && b0 <= o.b1 && o.b0 <= b1; }
     };
 
@@ -121,7 +124,7 @@ class BundleTracer {
             for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], hit_[j]);
             return;
         }
-        if (!enclose()) {  // a bundle too wide to project: ray by ray
+        if (!enclose()) {  // a bundle too wide to project, or incoherent: ray by ray
             for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], trace_ray<KernelT, Real>(scene_, ray_[j], context_));
             return;
         }
@@ -146,7 +149,7 @@ class BundleTracer {
     /// Finds the bundle's axis c, its cross axes p, q and each ray's projection (a, b) =
     /// (d.p, d.q) / d.c onto the plane at distance 1 along c, with the rectangles of rows
     /// and blocks, and the blocks' far bounds. False when some ray turns too far from c for
-    /// the projection (beyond about 80 degrees).
+    /// the projection (beyond about 80 degrees), or the rays are not a coherent grid.
     bool enclose() {
         const double* mid = ray_[n_ / 2].dir;
         const double* last = ray_[(n_ / 2 / cols_) * cols_ + cols_ - 1].dir;  // the middle row's last ray
@@ -176,6 +179,12 @@ class BundleTracer {
             all_.a0 = std::min(all_.a0, rows_rect_[r].a0), all_.a1 = std::max(all_.a1, rows_rect_[r].a1);
             all_.b0 = std::min(all_.b0, rows_rect_[r].b0), all_.b1 = std::max(all_.b1, rows_rect_[r].b1);
         }
+        // Rays in neighbouring directions cover the tile's rectangle with their blocks'
+        // small ones; blocks each spanning much of it (a grid of unrelated directions) would
+        // send every node to every block: such a tile goes ray by ray.
+        double blocks_area = 0;
+        for (int b = 0; b < rows_ * blocks_per_row(); ++b) blocks_area += blocks_[b].area();
+        if (blocks_area > 2 * all_.area()) return false;
         const double* axis[3] = {c_, p_, q_};
         for (int i = 0; i < 3; ++i) axes_[i].set(axis[i], origin_, reach_);
         for (int b = 0; b < rows_ * blocks_per_row(); ++b) update_block(b);

@@ -121,3 +121,30 @@ def test_rays_through_a_scene_beyond_the_caches_match_every_triangle_tested():
         np.testing.assert_array_equal(
             scene.occluded(origins, directions, tmin=tmin, tmax=tmax), every["triangle_id"] >= 0
         )
+
+
+@pytest.mark.parametrize("directions", ["fisheye", "unrelated"])
+def test_one_origin_and_a_grid_of_directions_equal_ray_by_ray(directions):
+    """One origin with (rows, columns, 3) directions goes in bundles (as a lidar does): the
+    same answers as the same rays with the origin repeated (ray by ray), whether the grid
+    is coherent (an equidistant fisheye camera) or not (random directions: each tile then
+    goes ray by ray)."""
+    scene = vrc.Scene(bumpy_sphere(5))
+    eye = np.array([0.4, -2.6, 0.9])
+    if directions == "fisheye":
+        forward = -eye / np.linalg.norm(eye)
+        right = np.cross(forward, [0, 0, 1.0])
+        right /= np.linalg.norm(right)
+        up = np.cross(right, forward)
+        u, v = np.meshgrid(np.linspace(-1, 1, 160), np.linspace(-1, 1, 120))
+        theta, phi = np.hypot(u, v) * np.radians(60), np.arctan2(v, u)  # 120-degree field
+        across = np.cos(phi)[..., None] * right + np.sin(phi)[..., None] * up
+        grid = np.cos(theta)[..., None] * forward + np.sin(theta)[..., None] * across
+    else:
+        grid = np.random.default_rng(3).normal(size=(120, 160, 3))
+    arrays = ["triangle_id", "t", "barycentric", "position", "normal"]
+    bundled = scene.intersect(eye, grid, arrays=arrays)
+    one_by_one = scene.intersect(np.broadcast_to(eye, grid.shape), grid, arrays=arrays)
+    assert 0.01 < np.mean(one_by_one["triangle_id"] >= 0) < 0.95
+    for name in arrays:
+        np.testing.assert_array_equal(bundled[name], one_by_one[name])
