@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <optional>
 
 #include "kernel_watertight.hpp"
@@ -172,8 +173,10 @@ class BundleTracer {
                 if (!(w > 0 && w * w > 0.03 * dot(d, d))) return false;
                 const double inverse = 1 / w;
                 a_[j] = dot(d, p_) * inverse, b_[j] = dot(d, q_) * inverse;
-                if ((j - r * cols_) % kBlock == 0) blocks_[block(j)] = Rect{};
-                blocks_[block(j)].grow(a_[j], b_[j]);
+                const int column = j - r * cols_, b = r * blocks_per_row() + column / kBlock;
+                if (column % kBlock == 0) blocks_[b] = Rect{}, block_first_[b] = j;
+                block_of_[j] = b;
+                blocks_[b].grow(a_[j], b_[j]);
                 rows_rect_[r].grow(a_[j], b_[j]);
             }
             all_.a0 = std::min(all_.a0, rows_rect_[r].a0), all_.a1 = std::max(all_.a1, rows_rect_[r].a1);
@@ -182,12 +185,15 @@ class BundleTracer {
         // Rays in neighbouring directions cover the tile's rectangle with their blocks'
         // small ones; blocks each spanning much of it (a grid of unrelated directions) would
         // send every node to every block: such a tile goes ray by ray.
+        n_blocks_ = rows_ * blocks_per_row();
+        block_first_[n_blocks_] = n_;
         double blocks_area = 0;
-        for (int b = 0; b < rows_ * blocks_per_row(); ++b) blocks_area += blocks_[b].area();
+        for (int b = 0; b < n_blocks_; ++b) blocks_area += blocks_[b].area();
         if (blocks_area > 2 * all_.area()) return false;
         const double* axis[3] = {c_, p_, q_};
         for (int i = 0; i < 3; ++i) axes_[i].set(axis[i], origin_, reach_);
-        for (int b = 0; b < rows_ * blocks_per_row(); ++b) update_block(b);
+        for (int b = 0; b < n_blocks_; ++b) block_far_[b] = search_far(b);
+        set_far();
         return true;
     }
 
@@ -203,7 +209,6 @@ class BundleTracer {
     static void cross(const double a[3], const double b[3], double out[3]) {
         out[0] = a[1] * b[2] - a[2] * b[1], out[1] = a[2] * b[0] - a[0] * b[2], out[2] = a[0] * b[1] - a[1] * b[0];
     }
-    [[nodiscard]] int block(int j) const { return j / cols_ * blocks_per_row() + j % cols_ / kBlock; }
     [[nodiscard]] int blocks_per_row() const { return (cols_ + kBlock - 1) / kBlock; }
 
     /// An axis n (c, p or q) on eight boxes at once in float: n.x at each box's corners
@@ -237,15 +242,22 @@ class BundleTracer {
     };
 
     /// Block b's far bound: the greatest distance along c its rays still search to.
-    void update_block(int b) {
-        const int r = b / blocks_per_row(), j0 = r * cols_ + b % blocks_per_row() * kBlock;
+    [[nodiscard]] double search_far(int b) const {
         double far = 0;
-        for (int j = j0, end = std::min(j0 + kBlock, (r + 1) * cols_); j < end; ++j) far = std::max(far, bound_[j] * w_[j]);
-        block_far_[b] = far * (1 + 1e-9);  // (above the rounding of the product)
-        far = 0;
-        for (int i = 0; i < rows_ * blocks_per_row(); ++i) far = std::max(far, block_far_[i]);
-        far_ = far;
-        far_limit_ = std::isinf(far) ? HUGE_VALF : round_up(far + axes_[0].n_o + axes_[0].slack);
+        for (int j = block_first_[b]; j < block_first_[b + 1]; ++j) far = std::max(far, bound_[j] * w_[j]);
+        return far * (1 + 1e-9);  // (above the rounding of the product)
+    }
+    /// The bundle's far bound, the greatest of its blocks', and its float limit on boxes.
+    void set_far() {
+        far_ = *std::max_element(block_far_, block_far_ + n_blocks_);
+        far_limit_ = std::isinf(far_) ? HUGE_VALF : round_up(far_ + axes_[0].n_o + axes_[0].slack);
+    }
+    /// After a ray of block b came closer (bounds only shrink: the bundle's far bound
+    /// changes only when b held it).
+    void update_block(int b) {
+        const double before = block_far_[b];
+        block_far_[b] = search_far(b);
+        if (before >= far_) set_far();
     }
 
     /// Whether some block's rays may meet a box projecting into `rect` at distances along
@@ -341,11 +353,10 @@ class BundleTracer {
             if (!rows_rect_[r].meets(rect)) continue;
             for (int b = r * blocks_per_row(); b < (r + 1) * blocks_per_row(); ++b) {
                 if (block_far_[b] < nearest || !blocks_[b].meets(rect)) continue;
-                const int j0 = r * cols_ + (b - r * blocks_per_row()) * kBlock;
-                for (int j = j0, end = std::min(j0 + kBlock, (r + 1) * cols_); j < end; ++j)
+                for (int j = block_first_[b]; j < block_first_[b + 1]; ++j)
                     if (a_[j] >= rect.a0 && a_[j] <= rect.a1 && b_[j] >= rect.b0 && b_[j] <= rect.b1 &&
                         bound_[j] * w_[j] >= nearest)
-                        candidates_[n++] = j;
+                        candidate_a_[n] = a_[j], candidate_b_[n] = b_[j], candidates_[n++] = j;
             }
         }
         if (n == 0) return;
@@ -355,7 +366,7 @@ class BundleTracer {
         else
             by_ray(first, count, n);
         for (int c = 0; c < n; ++c)
-            if (changed_[candidates_[c]]) changed_[candidates_[c]] = false, update_block(block(candidates_[c]));
+            if (changed_[candidates_[c]]) changed_[candidates_[c]] = false, update_block(block_of_[candidates_[c]]);
     }
 
     /// Many rays in a leaf's box: each triangle is projected and tested on the candidates
@@ -392,13 +403,19 @@ class BundleTracer {
                 rect = Rect{-HUGE_VAL, HUGE_VAL, -HUGE_VAL, HUGE_VAL};
                 nearest = -HUGE_VAL;
             }
-            for (int c = 0; c < n; ++c) {
-                const int j = candidates_[c];
-                if (a_[j] < rect.a0 || a_[j] > rect.a1 || b_[j] < rect.b0 || b_[j] > rect.b1 || bound_[j] * w_[j] < nearest)
-                    continue;
-                const double before = bound_[j];
-                test_triangle(kernel(j), scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
-                changed_[j] |= bound_[j] != before;
+            for (int c0 = 0; c0 < n; c0 += 4) {  // the candidates in the rectangle, four at a time
+                Double4 a, b;
+                std::memcpy(&a, candidate_a_ + c0, sizeof a);
+                std::memcpy(&b, candidate_b_ + c0, sizeof b);
+                const Mask4 in = (a >= rect.a0) & (a <= rect.a1) & (b >= rect.b0) & (b <= rect.b1);
+                unsigned m = unsigned(in[0] & 1) | unsigned(in[1] & 2) | unsigned(in[2] & 4) | unsigned(in[3] & 8);
+                for (m &= n - c0 >= 4 ? 15u : (1u << (n - c0)) - 1; m; m &= m - 1) {
+                    const int j = candidates_[c0 + __builtin_ctz(m)];
+                    if (bound_[j] * w_[j] < nearest) continue;
+                    const double before = bound_[j];
+                    test_triangle(kernel(j), scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
+                    changed_[j] |= bound_[j] != before;
+                }
             }
         }
     }
@@ -434,13 +451,15 @@ class BundleTracer {
     double far_ = HUGE_VAL;  ///< the greatest of the blocks' far bounds
     float far_limit_ = HUGE_VALF;  ///< boxes whose least c.x (float) lies beyond this are beyond far_
     Rect all_, rows_rect_[kMaxRays], blocks_[kMaxRays];
+    int n_blocks_ = 0, block_first_[kMaxRays + 1], block_of_[kMaxRays];  ///< block b: rays block_first_[b] .. [b + 1] - 1
     double block_far_[kMaxRays];
     std::size_t index_[kMaxRays];
     Ray ray_[kMaxRays];
     std::optional<Kernel> kernel_[kMaxRays];
     std::optional<TriangleFilter> filter_[kMaxRays];
     bool changed_[kMaxRays];  ///< whether ray j's bound came closer in the leaf
-    int candidates_[kMaxRays];  ///< the rays a leaf is tested on
+    int candidates_[kMaxRays];  ///< the rays a leaf is tested on, and their projections
+    double candidate_a_[kMaxRays + 3], candidate_b_[kMaxRays + 3];
     Hit<Real> hit_[kMaxRays];
     double bound_[kMaxRays], w_[kMaxRays], a_[kMaxRays], b_[kMaxRays];
 };
