@@ -95,7 +95,10 @@ class BundleTracer {
     static constexpr int kBlock = 8;  ///< rays of a row tested against a triangle's rectangle together
     struct Rect {
         double a0 = HUGE_VAL, a1 = -HUGE_VAL, b0 = HUGE_VAL, b1 = -HUGE_VAL;
-        void grow(double a, double b) { a0 = std::min(a0, a), a1 = std::max(a1, a), b0 = std::min(b0, b), b1 = std::max(b1, b); }
+        void grow(double a, double b) {
+            a0 = std::min(a0, a), a1 = std::max(a1, a);
+            b0 = std::min(b0, b), b1 = std::max(b1, b);
+        }
         [[nodiscard]] double area() const { return (a1 - a0) * (b1 - b0); }
         [[nodiscard]] bool meets(const Rect& o) const { return a0 <= o.a1 && o.a0 <= a1 && b0 <= o.b1 && o.b0 <= b1; }
     };
