@@ -372,6 +372,32 @@ class BundleTracer {
             if (changed_[candidates_[c]]) changed_[candidates_[c]] = false, update_block(block_of_[candidates_[c]]);
     }
 
+    /// A triangle's projection (its points' (a, b), all in front): a ray whose projection
+    /// lies outside it by more than the roundings of the projections misses the triangle,
+    /// whose exact test would only confirm it.
+    struct Outline {
+        double a[3], b[3];
+        double sense = 0;  ///< +1 or -1 as the outline turns, 0 when too thin to tell (or unset)
+        void orient() {
+            const double area = (a[1] - a[0]) * (b[2] - b[0]) - (b[1] - b[0]) * (a[2] - a[0]);
+            const double span = std::fabs(a[1] - a[0]) + std::fabs(b[1] - b[0]) + std::fabs(a[2] - a[0]) + std::fabs(b[2] - b[0]);
+            sense = std::fabs(area) > 1e-9 * span * span ? (area > 0 ? 1 : -1) : 0;
+        }
+        [[nodiscard]] bool outside(double pa, double pb) const {
+            if (sense == 0) return false;
+            for (int u = 0; u < 3; ++u) {
+                const int v = u == 2 ? 0 : u + 1;
+                const double da = a[v] - a[u], db = b[v] - b[u], qa = pa - a[u], qb = pb - b[u];
+                const double edge = sense * (da * qb - db * qa);
+                // (the projections are good to about 1e-14 here, values below 9)
+                const double margin = 1e-9 * (std::fabs(da * qb) + std::fabs(db * qa)) +
+                                      1e-12 * (std::fabs(da) + std::fabs(db) + std::fabs(qa) + std::fabs(qb));
+                if (edge < -margin) return true;
+            }
+            return false;
+        }
+    };
+
     /// Many rays in a leaf's box: each triangle is projected and tested on the candidates
     /// in its own rectangle (the kernel alone: a hit needs its exact test anyway).
     static constexpr int kRaysByTriangle = 4;
@@ -379,6 +405,7 @@ class BundleTracer {
         for (uint32_t i = first; i < first + count; ++i) {
             const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
             Rect rect;
+            Outline outline;
             double nearest = HUGE_VAL;
             bool projects = true, behind = true;
             for (int v = 0; v < 3; ++v) {
@@ -392,7 +419,8 @@ class BundleTracer {
                     continue;
                 }
                 const double inverse = 1 / w;
-                rect.grow(dot(x, p_) * inverse, dot(x, q_) * inverse);
+                outline.a[v] = dot(x, p_) * inverse, outline.b[v] = dot(x, q_) * inverse;
+                rect.grow(outline.a[v], outline.b[v]);
             }
             if (behind) continue;  // (the rays meet points with w >= 0 only)
             if (projects) {
@@ -402,6 +430,7 @@ class BundleTracer {
                 const double s = 1e-12;
                 rect.a0 -= s, rect.a1 += s, rect.b0 -= s, rect.b1 += s;
                 nearest *= 1 - 1e-9;
+                outline.orient();
             } else {
                 rect = Rect{-HUGE_VAL, HUGE_VAL, -HUGE_VAL, HUGE_VAL};
                 nearest = -HUGE_VAL;
@@ -413,8 +442,8 @@ class BundleTracer {
                 const Mask4 in = (a >= rect.a0) & (a <= rect.a1) & (b >= rect.b0) & (b <= rect.b1);
                 unsigned m = unsigned(in[0] & 1) | unsigned(in[1] & 2) | unsigned(in[2] & 4) | unsigned(in[3] & 8);
                 for (m &= n - c0 >= 4 ? 15u : (1u << (n - c0)) - 1; m; m &= m - 1) {
-                    const int j = candidates_[c0 + __builtin_ctz(m)];
-                    if (bound_[j] * w_[j] < nearest) continue;
+                    const int c = c0 + __builtin_ctz(m), j = candidates_[c];
+                    if (bound_[j] * w_[j] < nearest || outline.outside(candidate_a_[c], candidate_b_[c])) continue;
                     const double before = bound_[j];
                     test_triangle(kernel(j), scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
                     changed_[j] |= bound_[j] != before;

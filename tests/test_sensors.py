@@ -204,17 +204,21 @@ def _sweep_cases():
         vrc.Lidar((0.013, -0.021, 0.007), [-5, 0, 5, 10], 900, min_range=0.9, max_range=1.0),
     )
     poles = ("wide tiles", bumpy_sphere(4), vrc.Lidar((0.21, -0.033, 0.017), [-90, -60, -20, 0, 20, 60, 90], 12))
-    return [inside, outside, far, ranged, poles]
+    import pyvista as pv
+
+    # beams at multiples of 45 degrees pass within rounding of the box's edges and corners
+    edges = ("box edges", pv.Box(level=3).triangulate(), vrc.Lidar((0, 0, 0), [-45, -35.26438968, 0, 45], 360))
+    return [inside, outside, far, ranged, poles, edges]
 
 
 @pytest.mark.parametrize("case", _sweep_cases(), ids=lambda case: case[0])
 def test_scan_equals_intersect_bit_for_bit(case):
     """Scan's bundles against the ray-by-ray path on the same rays (every output), and the
-    hit triangles against Open3D's (Embree, float32: it may differ on rays within its
-    rounding of an edge)."""
+    hits against Open3D's (Embree, float32: the same triangle, or the same distance where
+    a beam passes within its rounding of an edge)."""
     import open3d as o3d
 
-    _, mesh, lidar = case
+    name, mesh, lidar = case
     scene = vrc.Scene(mesh)
     cloud, ranges = scene.scan(lidar, range_image=True)
     origins, directions, _, _ = lidar.rays()
@@ -222,6 +226,8 @@ def test_scan_equals_intersect_bit_for_bit(case):
                                 arrays=["triangle_id", "t", "barycentric", "position"])  # fmt: skip
     hit = reference["triangle_id"] >= 0
     assert 0 < hit.sum()
+    if name in ("inside", "box edges"):  # from inside a closed surface every beam returns
+        assert hit.all()
     np.testing.assert_array_equal(ranges.reshape(-1), reference["t"])
     np.testing.assert_array_equal(cloud["TriangleId"], reference["triangle_id"][hit])
     np.testing.assert_array_equal(cloud["Barycentric"], reference["barycentric"][hit])
@@ -235,8 +241,10 @@ def test_scan_equals_intersect_bit_for_bit(case):
     t = theirs["t_hit"].numpy()
     found = np.isfinite(t) & (t >= lidar.min_range) & (t <= lidar.max_range)
     theirs_id = np.where(found, theirs["primitive_ids"].numpy().astype(np.int64), -1)
-    # (Open3D's first hit may lie before min_range, where the lidar's search starts)
-    agree = (theirs_id == reference["triangle_id"]) | (lidar.min_range > 0) & (t < lidar.min_range)
+    # (Open3D's first hit may lie before min_range, where the lidar's search starts; on a
+    # shared edge it may take the other triangle, at the same distance)
+    same_point = np.abs(t - reference["t"]) <= 1e-5 * reference["t"]
+    agree = (theirs_id == reference["triangle_id"]) | same_point | (lidar.min_range > 0) & (t < lidar.min_range)
     assert np.mean(agree) > 0.999
 
 
