@@ -239,16 +239,18 @@ class CameraRays {
     int64_t i_lo_ = INT64_MIN / 2, i_hi_ = INT64_MAX / 2, r_lo_ = INT64_MIN / 2, r_hi_ = INT64_MAX / 2;
 };
 
-/// Rays from (n, 3) origin and direction arrays; the output is the ray parameter t.
+/// Rays from (n, 3) origin and direction arrays (with `one_origin`, a single origin row
+/// for all); the output is the ray parameter t.
 class ArrayRays {
    public:
-    ArrayRays(const double* origins, const double* directions, std::size_t n, double tmin, double tmax)
-        : o_(origins), d_(directions), n_(n), tmin_(tmin), tmax_(tmax) {}
+    ArrayRays(const double* origins, const double* directions, std::size_t n, double tmin, double tmax,
+              bool one_origin = false)
+        : o_(origins), d_(directions), n_(n), o_stride_(one_origin ? 0 : 3), tmin_(tmin), tmax_(tmax) {}
     [[nodiscard]] std::size_t size() const { return n_; }
     [[nodiscard]] Ray ray(std::size_t k) const {
         Ray ray;
         for (int a = 0; a < 3; ++a) {
-            ray.org[a] = o_[3 * k + a];
+            ray.org[a] = o_[o_stride_ * k + a];
             ray.dir[a] = d_[3 * k + a];
         }
         ray.tmin = tmin_;
@@ -267,7 +269,7 @@ class ArrayRays {
 
    private:
     const double *o_, *d_;
-    std::size_t n_;
+    std::size_t n_, o_stride_;
     double tmin_, tmax_;
 };
 

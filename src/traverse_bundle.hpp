@@ -1,12 +1,13 @@
 // Rays from one point in a grid: a lidar's rings x azimuth steps, a panorama's rows x
 // columns, a camera of the caller's own (Scene.intersect with one origin and a 2-D batch
-// of directions). Neighbouring rays of such a sweep meet the same nodes, so a tile of them goes
-// through the wide BVH as one bundle: the planes through the common origin that enclose
-// the bundle's rays (found from the rays themselves) cull a node once for all of them, and
-// a leaf's triangle is tested only on the rays whose central projection falls in the
-// triangle's projected rectangle. The test is the per-ray one (test_triangle) with the
-// exact watertight kernel, so every answer is trace_ray's. Frustum culling of ray packets
-// follows Reshetov, Soupikov and Hurley, "Multi-level ray tracing algorithm" (SIGGRAPH 2005).
+// of directions). Neighbouring rays of such a sweep meet the same nodes, so a tile of them
+// goes through the wide BVH as one bundle. Each ray is projected once onto the plane at
+// distance 1 along the tile's middle direction; a node's children are projected there too
+// and kept only where a block of rays meets them before those rays' closest hits, so a
+// node is tested once for all its rays; a leaf is tested only on the rays inside its
+// projection. The test is the per-ray one (test_triangle) with the exact watertight
+// kernel, so every answer is trace_ray's. Frustum culling of ray packets follows
+// Reshetov, Soupikov and Hurley, "Multi-level ray tracing algorithm" (SIGGRAPH 2005).
 #pragma once
 
 #include <algorithm>
@@ -15,6 +16,7 @@
 #include <cstring>
 #include <optional>
 
+#include "camera_rays.hpp"
 #include "kernel_watertight.hpp"
 #include "traverse.hpp"
 #include "triangle_filter.hpp"
@@ -28,7 +30,8 @@ namespace vrc {
 class SweepRays {
    public:
     SweepRays(const double* origin, const double* directions, int64_t rows, int64_t cols, double tmin, double tmax)
-        : o_(origin), d_(directions), rows_(rows), cols_(cols), tmin_(tmin), tmax_(tmax) {
+        : rays_(origin, directions, std::size_t(rows * cols), tmin, tmax, true), o_(origin), d_(directions), rows_(rows),
+          cols_(cols) {
         // Tiles about as wide as tall in angle: a lidar's rings lie farther apart than its
         // azimuth steps.
         const double across_row = turn(rows / 2, cols / 2, 0, 1), across_column = turn(rows / 2, cols / 2, 1, 0);
@@ -38,17 +41,7 @@ class SweepRays {
         tile_cols_ = std::min(kTileRays / tile_rows, cols);
     }
     [[nodiscard]] std::size_t size() const { return std::size_t(rows_ * cols_); }
-    [[nodiscard]] Ray ray(std::size_t k) const {
-        Ray ray;
-        for (int a = 0; a < 3; ++a) {
-            ray.org[a] = o_[a];
-            ray.dir[a] = d_[3 * k + a];
-        }
-        ray.tmin = tmin_;
-        ray.tmax = tmax_;
-        ray.normalize_direction();
-        return ray;
-    }
+    [[nodiscard]] Ray ray(std::size_t k) const { return rays_.ray(k); }
     [[nodiscard]] const double* origin() const { return o_; }
     [[nodiscard]] int64_t cols() const { return cols_; }
 
@@ -82,9 +75,9 @@ class SweepRays {
         for (int k = 0; k < 3; ++k) s += std::fabs(a[k] / la - b[k] / lb);
         return s;
     }
+    ArrayRays rays_;
     const double *o_, *d_;
     int64_t rows_, cols_, tile_rows_ = 1, tile_cols_ = 1;
-    double tmin_, tmax_;
 };
 
 /// Traces tiles of a sweep as bundles (see the top of this file). One per worker.
@@ -100,6 +93,7 @@ class BundleTracer {
             b0 = std::min(b0, b), b1 = std::max(b1, b);
         }
         [[nodiscard]] double area() const { return (a1 - a0) * (b1 - b0); }
+        [[nodiscard]] bool holds(double a, double b) const { return a >= a0 && a <= a1 && b >= b0 && b <= b1; }
         [[nodiscard]] bool meets(const Rect& o) const { return a0 <= o.a1 && o.a0 <= a1 && b0 <= o.b1 && o.b0 <= b1; }
     };
 
@@ -208,9 +202,6 @@ class BundleTracer {
         if (!(l > 1e-6 * std::sqrt(dot(v, v)))) return false;
         for (int k = 0; k < 3; ++k) u[k] /= l;
         return true;
-    }
-    static void cross(const double a[3], const double b[3], double out[3]) {
-        out[0] = a[1] * b[2] - a[2] * b[1], out[1] = a[2] * b[0] - a[0] * b[2], out[2] = a[0] * b[1] - a[1] * b[0];
     }
     [[nodiscard]] int blocks_per_row() const { return (cols_ + kBlock - 1) / kBlock; }
 
@@ -357,12 +348,12 @@ class BundleTracer {
             for (int b = r * blocks_per_row(); b < (r + 1) * blocks_per_row(); ++b) {
                 if (block_far_[b] < nearest || !blocks_[b].meets(rect)) continue;
                 for (int j = block_first_[b]; j < block_first_[b + 1]; ++j)
-                    if (a_[j] >= rect.a0 && a_[j] <= rect.a1 && b_[j] >= rect.b0 && b_[j] <= rect.b1 &&
-                        bound_[j] * w_[j] >= nearest)
+                    if (rect.holds(a_[j], b_[j]) && bound_[j] * w_[j] >= nearest)
                         candidate_a_[n] = a_[j], candidate_b_[n] = b_[j], candidates_[n++] = j;
             }
         }
         if (n == 0) return;
+        for (int c = n; c < n + 3; ++c) candidate_a_[c] = candidate_b_[c] = NAN;  // (outside every rectangle)
         for (uint32_t i = first; i < first + count; ++i) scene_.prefetch_points(i);
         if (n > kRaysByTriangle)
             by_triangle(first, count, n);
@@ -440,8 +431,8 @@ class BundleTracer {
                 std::memcpy(&a, candidate_a_ + c0, sizeof a);
                 std::memcpy(&b, candidate_b_ + c0, sizeof b);
                 const Mask4 in = (a >= rect.a0) & (a <= rect.a1) & (b >= rect.b0) & (b <= rect.b1);
-                unsigned m = unsigned(in[0] & 1) | unsigned(in[1] & 2) | unsigned(in[2] & 4) | unsigned(in[3] & 8);
-                for (m &= n - c0 >= 4 ? 15u : (1u << (n - c0)) - 1; m; m &= m - 1) {
+                const unsigned inside = unsigned(in[0] & 1) | unsigned(in[1] & 2) | unsigned(in[2] & 4) | unsigned(in[3] & 8);
+                for (unsigned m = inside; m; m &= m - 1) {
                     const int c = c0 + __builtin_ctz(m), j = candidates_[c];
                     if (bound_[j] * w_[j] < nearest || outline.outside(candidate_a_[c], candidate_b_[c])) continue;
                     const double before = bound_[j];
