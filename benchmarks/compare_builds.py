@@ -7,7 +7,8 @@ ratios where separate runs minutes apart cannot resolve it.
     (change the core)
     pip install --no-build-isolation --no-deps . --target /tmp/after -Cbuild-dir=/tmp/build-after
     python benchmarks/compare_builds.py /tmp/before /tmp/after [--rounds 60] [--threads 2]
-        [--scene frog|channels|terrain|bumpy|small] [--view framed|close|full|lidar] [--flat] [--pixels 1024]
+        [--scene frog|channels|terrain|bumpy|small|sphere|ant] [--view framed|close|full|lidar|rays]
+        [--flat] [--pixels 1024]
         [--arrays ids|geometry|default] [--cold]
 
 Each directory holds an installed ``vtkraycast``. Each build runs in its own process (two
@@ -22,8 +23,11 @@ round by round. The frog, channels and terrain scenes and their views are benchm
 default geometry (``geometry``: interpolate=False), the defaults with the mesh's arrays
 (``default``), or the arrays named (``Depth,Elevation``). Builds are compared by the first
 array cast. ``--view lidar`` times ``Scene.scan`` of benchmarks/sensors.py's 64 x 2048
-lidar instead, comparing range images. ``--cold`` writes over 64 MB before each cast, as another caster run in
-between would (peers.py's alternated pairs), so the cast finds its scene out of cache.
+lidar instead, comparing range images; ``--view rays`` times ``Scene.intersect`` (its default
+arrays) of benchmarks/rays.py's rays from outside (500,000; ``--rays``), comparing triangle
+ids; the sphere scene is rays.py's 20 k-triangle bumpy sphere, the ant pyvista's.
+``--cold`` writes over 64 MB before each cast, as another caster run in between would
+(peers.py's alternated pairs), so the cast finds its scene out of cache.
 """
 
 from __future__ import annotations
@@ -48,7 +52,11 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
     from vtkraycast.testing import bumpy_sphere
 
     n = args.pixels
-    if args.scene == "bumpy":
+    if args.scene in ("sphere", "ant"):
+        from pyvista import examples
+
+        mesh = bumpy_sphere(5) if args.scene == "sphere" else examples.load_ant()
+    elif args.scene == "bumpy":
         mesh = bumpy_sphere(7)
         camera = vrc.Camera((2.2, 1.6, 1.2), (0, 0, 0), (0, 0, 1), view_angle=40, nx=n, ny=n)
     elif args.scene == "small":  # benchmarks/skipping.py's sphere covering 1 % of the frame
@@ -56,15 +64,25 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
         camera = vrc.Camera((0, 0, 2.0), (0, 0, 0), (0, 1, 0), view_angle=158.3, nx=n, ny=n)
     else:
         import scenes
-        import sensors
 
         mesh = scenes.SCENES[args.scene]()
-        camera = sensors.scene_lidar(mesh, args.scene) if args.view == "lidar" else scenes.view(mesh, args.view, n)
     scene = vrc.Scene(mesh, threads=args.threads, bvh=not args.flat)
+    if args.view == "rays":
+        import rays
+
+        origins, directions, _ = rays.ray_sets(scene, args.rays, np.random.default_rng(7))["from outside"]
+    elif args.view == "lidar":
+        import sensors
+
+        camera = sensors.scene_lidar(mesh, args.scene)
+    elif args.scene not in ("bumpy", "small"):
+        camera = scenes.view(mesh, args.view, n)
     options = ARRAYS[args.arrays] if args.arrays in ARRAYS else {"arrays": args.arrays.split(",")}
     compared = options.get("arrays", ["TriangleId"])[0]
 
     def cast() -> np.ndarray:
+        if args.view == "rays":
+            return scene.intersect(origins, directions, threads=args.threads)["triangle_id"]
         if args.view == "lidar":
             return scene.scan(camera, range_image=True, threads=args.threads)[1]
         return np.asarray(scene.cast(camera, threads=args.threads, **options)[compared])
@@ -85,8 +103,11 @@ def main() -> None:
     parser.add_argument("builds", nargs="+", type=Path, help="directories of `pip install --target` builds")
     parser.add_argument("--rounds", type=int, default=60)
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--scene", choices=["frog", "channels", "terrain", "bumpy", "small"], default="frog")
-    parser.add_argument("--view", choices=["framed", "close", "full", "lidar"], default="framed")
+    parser.add_argument(
+        "--scene", choices=["frog", "channels", "terrain", "bumpy", "small", "sphere", "ant"], default="frog"
+    )
+    parser.add_argument("--view", choices=["framed", "close", "full", "lidar", "rays"], default="framed")
+    parser.add_argument("--rays", type=int, default=500_000, help="rays of --view rays")
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")
     parser.add_argument("--pixels", type=int, default=1024)
     parser.add_argument(
@@ -122,7 +143,10 @@ def main() -> None:
         pipe.send(False)
         child.join()
     n = args.pixels
-    what = "64 x 2048 beams, scan's arrays" if args.view == "lidar" else f"{n}x{n}, arrays: {args.arrays}"
+    what = {
+        "lidar": "64 x 2048 beams, scan's arrays",
+        "rays": f"{args.rays:,} rays from outside, intersect's arrays",
+    }.get(args.view, f"{n}x{n}, arrays: {args.arrays}")
     print(
         f"{args.scene} ({args.view}){' (flat)' if args.flat else ''}, {what}, {args.threads} threads, "
         f"{args.rounds} rounds" + (", 64 MB written over before each cast" if args.cold else "")

@@ -79,18 +79,18 @@ class FloatLanes {
             // d > 0: the near slab's distance (lo - o) / d is smallest with o rounded up,
             // the far one's largest with o rounded down; d < 0 the other way round.
             const float up = round_toward(hi, lo, true), down = round_toward(hi, lo, false);
-            org_near_[k] = lanes_set(negative ? down : up);
-            org_far_[k] = lanes_set(negative ? up : down);
-            inv_[k] = lanes_set(1.0f / static_cast<float>(d));
+            org_near_[k] = negative ? down : up;
+            org_far_[k] = negative ? up : down;
+            inv_[k] = 1.0f / static_cast<float>(d);
         }
-        tmin_ = lanes_set(round_down(ray.tmin));
+        tmin_ = round_down(ray.tmin);
         return true;
     }
 
     /// Follows the far end of the search, `bound`: boxes beyond it are not entered.
     void set_bound(double bound) {
         const float up = round_up(bound);
-        tmax_ = lanes_set(up);
+        tmax_ = up;
         // Entry distances are lower bounds of the exact ones up to their four roundings
         // (2^-21): a box whose entry lies beyond this may be passed over.
         limit_ = up * (1 + 0x1p-18f);
@@ -101,10 +101,11 @@ class FloatLanes {
     /// Lanes whose box overlaps [tmin, bound], as bits, and their entry distances (lower
     /// bounds of the exact ones).
     [[gnu::always_inline]] unsigned test(const WideNode& node, float enter[WideNode::kWidth]) const {
-        Lane8 t0 = tmin_, t1 = tmax_;
+        Lane8 t0 = lanes_set(tmin_), t1 = lanes_set(tmax_);
         for (int k = 0; k < 3; ++k) {
-            const Lane8 tn = lanes_mul(lanes_sub(lanes_load(node.bounds[near_[k]]), org_near_[k]), inv_[k]);
-            const Lane8 tf = lanes_mul(lanes_sub(lanes_load(node.bounds[far_[k]]), org_far_[k]), inv_[k]);
+            const Lane8 inv = lanes_set(inv_[k]);
+            const Lane8 tn = lanes_mul(lanes_sub(lanes_load(node.bounds[near_[k]]), lanes_set(org_near_[k])), inv);
+            const Lane8 tf = lanes_mul(lanes_sub(lanes_load(node.bounds[far_[k]]), lanes_set(org_far_[k])), inv);
             t0 = lanes_max(tn, t0);  // (the second operand where either is NaN)
             t1 = lanes_min(tf, t1);
         }
@@ -123,8 +124,10 @@ class FloatLanes {
         if (!up && (g > hi || (g == hi && lo < 0))) return next_float(f, false);
         return f;
     }
+    // (scalars, broadcast at each test: a search copies its lanes, and 400 bytes of
+    // registers' images cost more to copy per ray than the broadcasts per node)
     int near_[3], far_[3];
-    Lane8 org_near_[3], org_far_[3], inv_[3], tmin_, tmax_;
+    float org_near_[3], org_far_[3], inv_[3], tmin_ = 0, tmax_ = 0;
     float limit_ = 0;
 };
 
