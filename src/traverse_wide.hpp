@@ -14,7 +14,6 @@
 #include <type_traits>
 #include <vector>
 
-#include "exact_sign.hpp"
 #include "kernel_watertight.hpp"
 #include "traverse.hpp"
 #include "triangle_filter.hpp"
@@ -57,9 +56,9 @@ struct Lane8 {
 static_assert(WideNode::kWidth == 8, "a node's lanes are eight floats");
 
 /// Slab tests of a wide node's boxes in float. Conservative as in Ize, "Robust BVH Ray
-/// Traversal" (JCGT 2013): the origin relative to the anchor is rounded up where that makes
-/// a slab distance smaller and down where larger, so the slab distances (b - o) / d are
-/// computed from exact differences with four roundings (d to float, 1 / d, b - o, the
+/// Traversal" (JCGT 2013): the origin relative to the anchor is bounded above where that
+/// makes a slab distance smaller and below where larger, so the slab distances (b - o) / d
+/// are bounded by exact differences with four roundings (d to float, 1 / d, b - o, the
 /// product); the far distance is then widened by 2^-20 > 2 gamma(4). NaN (origin on the
 /// slab of a zero direction component) leaves a bound unchanged.
 class FloatLanes {
@@ -68,23 +67,27 @@ class FloatLanes {
     /// more than 2^60 from the anchor, a direction component nonzero but below 2^-60 of the
     /// largest, which is in [1, 2)).
     bool setup(const Ray& ray, const double anchor[3]) {
+        bool usable = true;
         for (int k = 0; k < 3; ++k) {
-            double hi, lo;
-            exact::two_diff(ray.org[k], anchor[k], hi, lo);
-            const double d = ray.dir[k];
-            if (!(std::fabs(hi) <= 0x1p60) || (d != 0 && std::fabs(d) < 0x1p-60)) return false;
+            const double o = ray.org[k] - anchor[k], d = ray.dir[k];
+            usable &= std::fabs(o) <= 0x1p60 && !(d != 0 && std::fabs(d) < 0x1p-60);
             const bool negative = std::signbit(d);
             near_[k] = negative ? 3 + k : k;
             far_[k] = negative ? k : 3 + k;
             // d > 0: the near slab's distance (lo - o) / d is smallest with o rounded up,
-            // the far one's largest with o rounded down; d < 0 the other way round.
-            const float up = round_toward(hi, lo, true), down = round_toward(hi, lo, false);
-            org_near_[k] = negative ? down : up;
-            org_far_[k] = negative ? up : down;
+            // the far one's largest with o rounded down; d < 0 the other way round. The
+            // exact o lies within one float ulp of o's nearest float f (half an ulp from
+            // that rounding, far less from the subtraction's), and f +- margin lies at least
+            // an ulp away: outward bounds without the branches of a directed rounding,
+            // which cost a per-ray setup more than a small scene's node tests.
+            const float f = static_cast<float>(o);
+            const float margin = std::fabs(f) * 0x1p-23f + 0x1p-126f;
+            org_near_[k] = negative ? f - margin : f + margin;
+            org_far_[k] = negative ? f + margin : f - margin;
             inv_[k] = 1.0f / static_cast<float>(d);
         }
         tmin_ = round_down(ray.tmin);
-        return true;
+        return usable;
     }
 
     /// Follows the far end of the search, `bound`: boxes beyond it are not entered.
@@ -116,14 +119,6 @@ class FloatLanes {
 
    private:
     static constexpr float kWiden = 1.0f + 0x1p-20f;
-    /// hi + lo (a two-difference) rounded to a float above or below it.
-    static float round_toward(double hi, double lo, bool up) {
-        const float f = static_cast<float>(hi);
-        const double g = f;
-        if (up && (g < hi || (g == hi && lo > 0))) return next_float(f, true);
-        if (!up && (g > hi || (g == hi && lo < 0))) return next_float(f, false);
-        return f;
-    }
     // (scalars, broadcast at each test: a search copies its lanes, and 400 bytes of
     // registers' images cost more to copy per ray than the broadcasts per node)
     int near_[3], far_[3];
