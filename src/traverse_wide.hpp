@@ -70,10 +70,11 @@ class FloatLanes {
         bool usable = true;
         for (int k = 0; k < 3; ++k) {
             const double o = ray.org[k] - anchor[k], d = ray.dir[k];
-            usable &= std::fabs(o) <= 0x1p60 && !(d != 0 && std::fabs(d) < 0x1p-60);
-            const bool negative = std::signbit(d);
-            near_[k] = negative ? 3 + k : k;
-            far_[k] = negative ? k : 3 + k;
+            // (bitwise: random directions' signs would mispredict branches)
+            usable &= (std::fabs(o) <= 0x1p60) & ((std::fabs(d) >= 0x1p-60) | (d == 0));
+            const int negative = std::signbit(d) ? 1 : 0;
+            near_[k] = k + 3 * negative;
+            far_[k] = k + 3 - 3 * negative;
             // d > 0: the near slab's distance (lo - o) / d is smallest with o rounded up,
             // the far one's largest with o rounded down; d < 0 the other way round. The
             // exact o lies within one float ulp of o's nearest float f (half an ulp from
@@ -81,9 +82,9 @@ class FloatLanes {
             // an ulp away: outward bounds without the branches of a directed rounding,
             // which cost a per-ray setup more than a small scene's node tests.
             const float f = static_cast<float>(o);
-            const float margin = std::fabs(f) * 0x1p-23f + 0x1p-126f;
-            org_near_[k] = negative ? f - margin : f + margin;
-            org_far_[k] = negative ? f + margin : f - margin;
+            const float margin = std::copysign(std::fabs(f) * 0x1p-23f + 0x1p-126f, static_cast<float>(d));
+            org_near_[k] = f + margin;
+            org_far_[k] = f - margin;
             inv_[k] = 1.0f / static_cast<float>(d);
         }
         tmin_ = round_down(ray.tmin);
