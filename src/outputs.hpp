@@ -72,7 +72,7 @@ class OutputWriter {
 
     /// Ray k's closest hit (or a miss when none is found); `ray` is read on hits only.
     void operator()(std::size_t k, const Ray& ray, const Hit<Real>& hit) const {
-        if (!hit.found()) return misses(k, 1);
+        if (!hit.found()) return misses<1>(k);
         const uint32_t input = by_triangle(k, hit.prim);
         if (out_.depth) out_.depth[k] = static_cast<Real>(ray.output(hit.t));
         if (out_.barycentric)
@@ -114,14 +114,19 @@ class OutputWriter {
     }
 
     /// Misses for rays k to k + n - 1.
-    void misses(std::size_t k, std::size_t n) const {
+    /// (kCount: n known at compile time, so a single ray's miss is a store per array, not
+    /// a fill loop's set-up)
+    template <std::size_t kCount = 0>
+    void misses(std::size_t k, std::size_t n = kCount) const {
+        if constexpr (kCount != 0) n = kCount;
         if (out_.triangle_id) std::fill_n(out_.triangle_id + k, n, int64_t(-1));
         if (out_.cell_id) std::fill_n(out_.cell_id + k, n, int64_t(-1));
         if (out_.composite_index) std::fill_n(out_.composite_index + k, n, int64_t(-1));
-        if (out_.valid) std::memset(out_.valid + k, 0, n);
+        if (out_.valid) std::fill_n(out_.valid + k, n, uint8_t(0));
         if (out_.depth) std::fill_n(out_.depth + k, n, kNaN);
-        for (Real* triples : {out_.barycentric, out_.position, out_.normal})
-            if (triples) std::fill_n(triples + 3 * k, 3 * n, kNaN);
+        if (out_.barycentric) std::fill_n(out_.barycentric + 3 * k, 3 * n, kNaN);
+        if (out_.position) std::fill_n(out_.position + 3 * k, 3 * n, kNaN);
+        if (out_.normal) std::fill_n(out_.normal + 3 * k, 3 * n, kNaN);
         for (const Field& f : out_.fields) with_type(f.dtype, [&](auto zero) { fill_missing(f, zero, k, n); });
     }
 
