@@ -67,28 +67,39 @@ class FloatLanes {
     /// more than 2^60 from the anchor, a direction component nonzero but below 2^-60 of the
     /// largest, which is in [1, 2)).
     bool setup(const Ray& ray, const double anchor[3]) {
-        bool usable = true;
+        // The three axes at once in SSE2 lanes (either build): this runs once per ray, and
+        // a small scene's ray meets only two or three nodes.
+        const __m128d sign_d = _mm_set1_pd(-0.0);
+        const __m128d o01 = _mm_sub_pd(_mm_loadu_pd(ray.org), _mm_loadu_pd(anchor));
+        const __m128d o2 = _mm_sub_sd(_mm_load_sd(ray.org + 2), _mm_load_sd(anchor + 2));
+        const __m128d d01 = _mm_loadu_pd(ray.dir), d2 = _mm_load_sd(ray.dir + 2);
+        const auto unusable = [&](__m128d o, __m128d d) {  // (the unused fourth lane is 0, 0)
+            const __m128d far_origin = _mm_cmpnle_pd(_mm_andnot_pd(sign_d, o), _mm_set1_pd(0x1p60));  // (or NaN)
+            const __m128d tiny_direction = _mm_and_pd(_mm_cmplt_pd(_mm_andnot_pd(sign_d, d), _mm_set1_pd(0x1p-60)),
+                                                      _mm_cmpneq_pd(d, _mm_setzero_pd()));
+            return _mm_movemask_pd(_mm_or_pd(far_origin, tiny_direction));
+        };
+        if (unusable(o01, d01) | unusable(o2, d2)) return false;
+        // d > 0: the near slab's distance (lo - o) / d is smallest with o rounded up, the
+        // far one's largest with o rounded down; d < 0 the other way round. The exact o lies
+        // within one float ulp of o's nearest float f (half an ulp from that rounding, far
+        // less from the subtraction's), and f +- margin lies at least an ulp away: outward
+        // bounds without the branches of a directed rounding.
+        const __m128 sign = _mm_set1_ps(-0.0f);
+        const __m128 f = _mm_movelh_ps(_mm_cvtpd_ps(o01), _mm_cvtpd_ps(o2));
+        const __m128 d = _mm_movelh_ps(_mm_cvtpd_ps(d01), _mm_cvtpd_ps(d2));
+        const __m128 size = _mm_add_ps(_mm_mul_ps(_mm_andnot_ps(sign, f), _mm_set1_ps(0x1p-23f)), _mm_set1_ps(0x1p-126f));
+        const __m128 margin = _mm_or_ps(size, _mm_and_ps(sign, d));  // the sign of d
+        _mm_store_ps(org_near_, _mm_add_ps(f, margin));
+        _mm_store_ps(org_far_, _mm_sub_ps(f, margin));
+        _mm_store_ps(inv_, _mm_div_ps(_mm_set1_ps(1.0f), d));
+        const int negative = _mm_movemask_ps(d);
         for (int k = 0; k < 3; ++k) {
-            const double o = ray.org[k] - anchor[k], d = ray.dir[k];
-            // (bitwise: random directions' signs would mispredict branches)
-            usable &= (std::fabs(o) <= 0x1p60) & ((std::fabs(d) >= 0x1p-60) | (d == 0));
-            const int negative = std::signbit(d) ? 1 : 0;
-            near_[k] = k + 3 * negative;
-            far_[k] = k + 3 - 3 * negative;
-            // d > 0: the near slab's distance (lo - o) / d is smallest with o rounded up,
-            // the far one's largest with o rounded down; d < 0 the other way round. The
-            // exact o lies within one float ulp of o's nearest float f (half an ulp from
-            // that rounding, far less from the subtraction's), and f +- margin lies at least
-            // an ulp away: outward bounds without the branches of a directed rounding,
-            // which cost a per-ray setup more than a small scene's node tests.
-            const float f = static_cast<float>(o);
-            const float margin = std::copysign(std::fabs(f) * 0x1p-23f + 0x1p-126f, static_cast<float>(d));
-            org_near_[k] = f + margin;
-            org_far_[k] = f - margin;
-            inv_[k] = 1.0f / static_cast<float>(d);
+            near_[k] = k + 3 * (negative >> k & 1);
+            far_[k] = k + 3 - 3 * (negative >> k & 1);
         }
         tmin_ = round_down(ray.tmin);
-        return usable;
+        return true;
     }
 
     /// Follows the far end of the search, `bound`: boxes beyond it are not entered.
@@ -123,7 +134,8 @@ class FloatLanes {
     // (scalars, broadcast at each test: a search copies its lanes, and 400 bytes of
     // registers' images cost more to copy per ray than the broadcasts per node)
     int near_[3], far_[3];
-    float org_near_[3], org_far_[3], inv_[3], tmin_ = 0, tmax_ = 0;
+    alignas(16) float org_near_[4], org_far_[4], inv_[4];  ///< x, y, z (and an unused lane)
+    float tmin_ = 0, tmax_ = 0;
     float limit_ = 0;
 };
 
