@@ -48,6 +48,8 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
     message, answering with the time taken (and the image, for the first cast)."""
     sys.path.insert(0, build)
     sys.path.insert(1, str(Path(__file__).parent))
+    import scenes
+
     import vtkraycast as vrc
     from vtkraycast.testing import bumpy_sphere
 
@@ -63,8 +65,6 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
         mesh = bumpy_sphere(6)
         camera = vrc.Camera((0, 0, 2.0), (0, 0, 0), (0, 1, 0), view_angle=158.3, nx=n, ny=n)
     else:
-        import scenes
-
         mesh = scenes.SCENES[args.scene]()
     scene = vrc.Scene(mesh, threads=args.threads, bvh=not args.flat)
     if args.view == "rays":
