@@ -19,6 +19,7 @@
 #include "all_hits.hpp"
 #include "bvh.hpp"
 #include "camera_rays.hpp"
+#include "inside_grid.hpp"
 #include "kernel_cramer.hpp"
 #include "kernel_moller_trumbore.hpp"
 #include "kernel_plane.hpp"
@@ -438,6 +439,53 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "threads"_a, "counts_only"_a,
         "Every surface crossing in [tmin, tmax], sorted by ray then t: (ray, input triangle, t, weights); or, "
         "with counts_only, (crossings per ray, whether one is at t = 0).");
+    nb::class_<vrc::InsideGrid>(m, "InsideGrid",
+                                "Cells over a closed mesh's box answering inside/outside by lookup, or by a short segment to "
+                                "the nearest cell holding no triangle (src/inside_grid.hpp).")
+        .def(
+            "__init__",
+            [](vrc::InsideGrid* grid, Points points, Triangles triangles, std::array<double, 3> low,
+               std::array<double, 3> high, int per_axis) {
+                nb::gil_scoped_release release;
+                new (grid) vrc::InsideGrid(points.data(), points.shape(0), triangles.data(), triangles.shape(0), low,
+                                           high, per_axis);
+            },
+            "points"_a, "triangles"_a, "low"_a, "high"_a, "per_axis"_a)
+        .def_prop_ro("usable", &vrc::InsideGrid::usable)
+        .def_prop_ro("shape", &vrc::InsideGrid::shape)
+        .def(
+            "region_points",
+            [](const vrc::InsideGrid& grid) {
+                const auto found = grid.region_points();
+                auto* out = new double[3 * found.size()];
+                for (std::size_t i = 0; i < found.size(); ++i) std::copy(found[i].begin(), found[i].end(), out + 3 * i);
+                return owned_array(out, found.size(), 3);
+            },
+            "A point of each region of cells holding no triangle, to be decided and given to set_inside.")
+        .def(
+            "set_inside",
+            [](vrc::InsideGrid& grid, nb::ndarray<const uint8_t, nb::ndim<1>, nb::c_contig, nb::device::cpu> inside) {
+                if (inside.shape(0) != grid.regions()) throw std::invalid_argument("one answer per region");
+                grid.set_inside(inside.data());
+            },
+            "inside"_a)
+        .def(
+            "classify",
+            [](const vrc::InsideGrid& grid, Points points) {
+                const std::size_t n = points.shape(0);
+                auto* answers = new uint8_t[n];
+                std::vector<double> ends;
+                {
+                    nb::gil_scoped_release release;
+                    grid.classify(points.data(), n, answers, ends);
+                }
+                auto* end_rows = new double[ends.size()];
+                std::copy(ends.begin(), ends.end(), end_rows);
+                return nb::make_tuple(owned_array(answers, n, 1), owned_array(end_rows, ends.size() / 3, 3));
+            },
+            "points"_a,
+            "(answer per point: 0 outside, 1 inside, 2 / 3 decided by a segment to an end outside / inside; "
+            "those segments' ends, in order). Points must be finite.");
     m.def(
         "ray_extent",
         [](Points origins, Points directions, int threads) {

@@ -11,6 +11,7 @@ import pytest
 import pyvista as pv
 
 import vtkraycast as vrc
+import vtkraycast.scene as scene_module
 from vtkraycast.testing import bumpy_sphere
 
 
@@ -88,8 +89,16 @@ def test_counts_agree_with_open3d(level):
     np.testing.assert_array_equal(crossings["t"][first[:300]], closest)
 
 
+@pytest.fixture(params=["grid", "rays"])
+def contains_by(request, monkeypatch):
+    """contains answers large batches with a grid of cells and small ones with a ray per
+    point: the tests that take this run both ways."""
+    monkeypatch.setattr(scene_module, "_GRID_POINTS", 0 if request.param == "grid" else 2**62)
+    return request.param
+
+
 @pytest.mark.parametrize("flip", [False, True])
-def test_contains_equals_libigl_winding_number(flip):
+def test_contains_equals_libigl_winding_number(flip, contains_by):
     mesh = bumpy_sphere(3)
     if flip:
         mesh = mesh.copy()
@@ -108,7 +117,7 @@ def test_contains_equals_libigl_winding_number(flip):
     np.testing.assert_array_equal(scene.contains(queries), expected)
 
 
-def test_contains_on_a_grid_aligned_with_the_mesh():
+def test_contains_on_a_grid_aligned_with_the_mesh(contains_by):
     # a cube of unit grid squares: query points on the same grid lines as its vertices,
     # so every ray from them is aligned with the vertices in two of three coordinates
     box = pv.Box(bounds=(0, 4, 0, 4, 0, 4), level=3).triangulate().clean()
@@ -118,6 +127,41 @@ def test_contains_on_a_grid_aligned_with_the_mesh():
     expected = ((grid >= 0) & (grid <= 4)).all(axis=1)  # on the surface counts as inside
     np.testing.assert_array_equal(inside, expected)
     assert inside.shape == (len(grid),)
+
+
+def _shells() -> tuple[pv.PolyData, np.ndarray]:
+    """A bumpy shell around a cavity (an inner sphere facing inwards) and a separate small
+    sphere: three regions of empty cells at least, answers that differ between them; and
+    the centres of the three surfaces."""
+    outer = bumpy_sphere(4)
+    cavity = pv.Icosphere(radius=0.45, nsub=3).flip_faces()
+    apart = pv.Icosphere(radius=0.3, center=(2.2, 0.3, -0.1), nsub=2)
+    return outer + cavity + apart, np.array([[0.0, 0, 0], [0, 0, 0], [2.2, 0.3, -0.1]])
+
+
+@pytest.mark.parametrize(
+    ("offset", "scale", "grid"), [(0.0, 1.0, True), (0.0, 1e-6, True), (1e6, 1.0, True), (1e6, 1e-3, False)]
+)
+def test_contains_over_every_cell_of_the_grid_equals_the_winding_number(offset, scale, grid):
+    # Queries on a lattice four times finer than contains' cells (on their bounds, within
+    # roundings) and beside every vertex, with half the triangles flipped (parity does
+    # not care; the winding number is taken on the mesh as made). Far from the origin
+    # for its size the grid cannot place points safely in its cells: rays answer.
+    mesh, _ = _shells()
+    points, triangles = mesh.points.astype(np.float64), mesh.regular_faces.astype(np.int64)
+    rng = np.random.default_rng(11)
+    flipped = triangles.copy()
+    turn = rng.random(len(triangles)) < 0.5
+    flipped[turn] = flipped[turn][:, ::-1]
+    scene = vrc.Scene(pv.PolyData.from_regular_faces(points * scale + offset, flipped))
+    low, high = points.min(axis=0), points.max(axis=0)
+    steps = 4 * round(np.cbrt(scene_module._GRID_CELLS_PER_TRIANGLE * len(triangles)))
+    lattice = low + rng.integers(0, steps + 1, (20_000, 3)) / steps * (high - low).max()
+    queries = np.concatenate((lattice, points * 0.998, points * 1.002, points + 0.001))
+    expected = np.abs(igl.winding_number(points, triangles, queries)) > 0.5
+    np.testing.assert_array_equal(scene.contains(queries * scale + offset), expected)
+    assert bool(scene._grid) == grid
+    assert scene.contains(points * scale + offset).all()  # on the surface: inside
 
 
 def test_contains_refuses_open_meshes_and_keeps_shapes():

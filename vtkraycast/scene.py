@@ -41,6 +41,11 @@ RAY_ARRAYS = {
 }
 DEFAULT_RAY_ARRAYS = ("triangle_id", "cell_id", "t", "barycentric")
 #: Refuse images whose output arrays alone would exceed this many bytes.
+# contains answers batches of at least this many points with a grid of cells (about
+# _GRID_CELLS_PER_TRIANGLE a triangle), made once per scene.
+_GRID_POINTS = 4096
+_GRID_CELLS_PER_TRIANGLE = 2.0
+_GRID_MOST_PER_AXIS = 128
 _MAX_OUTPUT_BYTES = int(os.environ.get("VTKRAYCAST_MAX_OUTPUT_BYTES", 16 * 2**30))
 
 
@@ -158,6 +163,7 @@ class Scene:
         self._work = Workspace()  # (compositing's buffers, kept from cast to cast)
         self._bounds: tuple[np.ndarray, np.ndarray] | None = None  # (contains' box)
         self._closed: bool | None = None  # whether every edge has an even number of triangles
+        self._grid: _core.InsideGrid | bool | None = None  # contains' cells (False: cannot answer)
         self._mesh = prepare_mesh(mesh)
         self._outputs = BufferPool()  # the arrays of the last casts, reused once unreferenced
         points, triangles = self._mesh.points, self._mesh.triangles
@@ -779,18 +785,51 @@ class Scene:
         """
         self._check_closed()
         points = np.asarray(points, dtype=np.float64)
+        shape = points.shape[:-1]
+        if points.shape[-1:] != (3,):
+            raise ValueError(f"points must have shape (..., 3), got {points.shape}")
+        flat = np.ascontiguousarray(points.reshape(-1, 3))
+        grid = self._inside_grid(len(flat))
+        if grid is None or not np.isfinite(flat).all():  # (the rays name a point that is not finite)
+            return self._contains_by_rays(flat, threads).reshape(shape)
+        # Most points fall in cells that hold no triangle, answered by lookup; the others
+        # by the crossings of a segment to a point whose answer the grid knows.
+        answers, ends = grid.classify(flat)
+        inside = (answers & 1).astype(bool)
+        near = np.flatnonzero(answers >= 2)
+        if len(near):
+            starts = flat[near]
+            (counts, on_surface), _, _ = self._crossings(starts, ends - starts, 0.0, 1.0, threads, True)
+            inside[near] ^= (counts & 1).astype(bool)
+            inside[near] |= on_surface.view(bool)
+        return inside.reshape(shape)
+
+    def _contains_by_rays(self, points: np.ndarray, threads: int | None) -> np.ndarray:
+        """contains for (n, 3) points by the parity of the crossings along a ray from each."""
         # Any direction gives the same answer. Components of unequal size (no face of common
         # meshes holds such a direction), their signs chosen point by point towards the
         # nearer side of the mesh's box on each axis: the ray then leaves the box through its
         # nearest face, meeting fewer nodes and crossings on the way.
         direction = [0.5773502691896257, 0.5773502691896258, 0.5773502691896256]
-        shape = points.shape[:-1]
-        if points.shape[-1:] != (3,):
-            raise ValueError(f"points must have shape (..., 3), got {points.shape}")
-        flat = np.ascontiguousarray(points.reshape(-1, 3))
-        directions = _core.exit_directions(flat, *self._box(), direction).reshape(*shape, 3)
-        (counts, on_surface), shape, _ = self._crossings(points, directions, 0.0, math.inf, threads, True)
-        return ((counts & 1).astype(bool) | on_surface.view(bool)).reshape(shape)
+        directions = _core.exit_directions(points, *self._box(), direction)
+        (counts, on_surface), _, _ = self._crossings(points, directions, 0.0, math.inf, threads, True)
+        return (counts & 1).astype(bool) | on_surface.view(bool)
+
+    def _inside_grid(self, points: int) -> _core.InsideGrid | None:
+        """contains' grid of cells (src/inside_grid.hpp), made at the first batch large enough
+        to repay it (about two cells per triangle, at most 128 along the box's longest side: the
+        cells' lookups stay in the caches);
+        None where the grid cannot answer (a box far from the origin for its size)."""
+        if self._grid is None and points >= _GRID_POINTS:
+            mesh = self._mesh
+            per_axis = int(
+                np.clip(round(np.cbrt(_GRID_CELLS_PER_TRIANGLE * len(mesh.triangles))), 8, _GRID_MOST_PER_AXIS)
+            )
+            grid = _core.InsideGrid(mesh.points, mesh.triangles, *self._box(), per_axis)
+            if grid.usable:
+                grid.set_inside(self._contains_by_rays(grid.region_points(), None).astype(np.uint8))
+            self._grid = grid if grid.usable else False
+        return self._grid or None
 
     def _box(self) -> tuple[np.ndarray, np.ndarray]:
         """The least and greatest coordinates of the mesh's points (once per scene)."""
@@ -803,8 +842,9 @@ class Scene:
         if self._closed is None:
             triangles = self._mesh.triangles.astype(np.int64)
             edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-            _, counts = np.unique(edges, axis=0, return_counts=True)
-            self._closed = bool((counts % 2 == 0).all())
+            keys = np.sort(edges[:, 0] << 32 | edges[:, 1])  # (point ids are below 2**32)
+            runs = np.diff(np.flatnonzero(np.diff(keys, prepend=-1, append=-1)))  # lengths of equal keys
+            self._closed = bool((runs % 2 == 0).all())
         if not self._closed:
             raise ValueError(
                 "contains needs a closed surface (every edge shared by an even number of triangles); "
