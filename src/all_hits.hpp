@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <memory>
 #include <thread>
 #include <vector>
 
@@ -34,6 +35,7 @@ struct RayHit {
 /// parity that inside/outside tests rest on stays right. Features are point ids: triangles
 /// must share their points.
 inline void keep_crossings(std::vector<RayHit>& hits) {
+    if (hits.size() < 2) return;
     std::size_t kept = 0;
     for (const RayHit& h : hits) {
         std::size_t same = kept;
@@ -134,6 +136,57 @@ void for_each_crossings(const Scene& scene, const ArrayRays& rays, unsigned thre
     for (unsigned p = 1; p < parts; ++p) workers.emplace_back(work, p);
     work(0);
     for (auto& w : workers) w.join();
+}
+
+/// Every crossing of rays 0 .. n - 1 in flat arrays, by ray then t: ray k's are rows
+/// splits[k] .. splits[k + 1] - 1 (Open3D's list_intersections layout).
+struct CrossingList {
+    std::size_t rows = 0;
+    std::unique_ptr<int64_t[]> splits, ray, triangle;  ///< (n + 1), rows, rows
+    std::unique_ptr<double[]> t, b;                      ///< rows, 3 rows
+};
+
+/// The workers keep their rays' crossings as found (a slice's rays may finish in any
+/// order), with each ray's place among them; the counts' running sum then places every
+/// ray's rows, and the rows are copied there in parallel: no sort.
+inline CrossingList list_crossings(const Scene& scene, const ArrayRays& rays, unsigned threads) {
+    const std::size_t n = rays.size();
+    std::vector<std::vector<RayHit>> found(std::max(1u, threads));
+    std::unique_ptr<uint32_t[]> count(new uint32_t[n]), part(new uint32_t[n]);
+    std::unique_ptr<std::size_t[]> first(new std::size_t[n]);
+    for_each_crossings(scene, rays, threads, [&](unsigned p, std::size_t k, const std::vector<RayHit>& hits) {
+        count[k] = uint32_t(hits.size());
+        part[k] = p;
+        first[k] = found[p].size();
+        found[p].insert(found[p].end(), hits.begin(), hits.end());
+    });
+    CrossingList list;
+    list.splits.reset(new int64_t[n + 1]);
+    list.splits[0] = 0;
+    for (std::size_t k = 0; k < n; ++k) list.splits[k + 1] = list.splits[k] + count[k];
+    list.rows = std::size_t(list.splits[n]);
+    list.ray.reset(new int64_t[list.rows]);
+    list.triangle.reset(new int64_t[list.rows]);
+    list.t.reset(new double[list.rows]);
+    list.b.reset(new double[3 * list.rows]);
+    auto copy = [&](std::size_t begin, std::size_t end) {
+        for (std::size_t k = begin; k < end; ++k) {
+            const RayHit* h = found[part[k]].data() + first[k];
+            for (std::size_t row = std::size_t(list.splits[k]), last = std::size_t(list.splits[k + 1]); row < last;
+                 ++row, ++h) {
+                list.ray[row] = int64_t(k);
+                list.triangle[row] = h->triangle;
+                list.t[row] = h->t;
+                for (int c = 0; c < 3; ++c) list.b[3 * row + c] = h->b[c] + 0.0;  // (no -0.0)
+            }
+        }
+    };
+    const unsigned parts = std::max(1u, std::min<unsigned>(threads, unsigned(list.rows / 65536 + 1)));
+    std::vector<std::thread> workers;
+    for (unsigned p = 1; p < parts; ++p) workers.emplace_back(copy, n * p / parts, n * (p + 1) / parts);
+    copy(0, n / parts);
+    for (auto& w : workers) w.join();
+    return list;
 }
 
 }  // namespace vrc

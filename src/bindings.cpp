@@ -411,33 +411,19 @@ VRC_NB_MODULE(VRC_MODULE, m) {
                 }
                 return nb::make_tuple(owned_array(counts, n, 1), owned_array(at_origin, n, 1));
             }
-            std::vector<std::vector<vrc::RayHit>> parts(n_threads);
+            vrc::CrossingList list;
             {
                 nb::gil_scoped_release release;
-                vrc::for_each_crossings(scene, rays, n_threads, [&](unsigned part, std::size_t, const std::vector<vrc::RayHit>& h) {
-                    parts[part].insert(parts[part].end(), h.begin(), h.end());
-                });
+                list = vrc::list_crossings(scene, rays, n_threads);
             }
-            std::vector<vrc::RayHit> hits;  // (the parts are slices of the rays, in order)
-            for (auto& part : parts) hits.insert(hits.end(), part.begin(), part.end());
-            // (a slice's rays may finish in any order; each ray's crossings stay together, by t)
-            std::stable_sort(hits.begin(), hits.end(), [](const vrc::RayHit& x, const vrc::RayHit& y) { return x.ray < y.ray; });
-            const std::size_t m = hits.size();
-            auto* ray = new int64_t[m];
-            auto* triangle = new int64_t[m];
-            auto* t = new double[m];
-            auto* b = new double[3 * m];
-            for (std::size_t i = 0; i < m; ++i) {
-                ray[i] = int64_t(hits[i].ray);
-                triangle[i] = hits[i].triangle;
-                t[i] = hits[i].t;
-                for (int c = 0; c < 3; ++c) b[3 * i + c] = hits[i].b[c] + 0.0;  // (no -0.0)
-            }
-            return nb::make_tuple(owned_array(ray, m, 1), owned_array(triangle, m, 1), owned_array(t, m, 1),
-                                  owned_array(b, m, 3));
+            const std::size_t m = list.rows;
+            return nb::make_tuple(owned_array(list.splits.release(), n + 1, 1), owned_array(list.ray.release(), m, 1),
+                                  owned_array(list.triangle.release(), m, 1), owned_array(list.t.release(), m, 1),
+                                  owned_array(list.b.release(), m, 3));
         },
         "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "threads"_a, "counts_only"_a,
-        "Every surface crossing in [tmin, tmax], sorted by ray then t: (ray, input triangle, t, weights); or, "
+        "Every surface crossing in [tmin, tmax], by ray then t: (splits, ray, input triangle, t, weights), ray k's "
+        "rows splits[k] .. splits[k + 1] - 1; or, "
         "with counts_only, (crossings per ray, whether one is at t = 0).");
     nb::class_<vrc::InsideGrid>(m, "InsideGrid",
                                 "Cells over a closed mesh's box answering inside/outside by lookup, or by a short segment to "

@@ -224,12 +224,13 @@ class WideSearch {
         alignas(32) float enter[WideNode::kWidth];
         unsigned mask = lanes_.test(node, enter);
         // Push the entered lanes farthest first (an insertion sort: most nodes have few
-        // entered lanes), so the nearest is popped first.
+        // entered lanes), so the nearest is popped first; every hit wanted, any order does.
         int order[WideNode::kWidth], n = 0;
         for (; mask; mask &= mask - 1) {
             const int c = __builtin_ctz(mask);
             int at = n++;
-            for (; at > 0 && enter[order[at - 1]] < enter[c]; --at) order[at] = order[at - 1];
+            if constexpr (kPolicy != HitPolicy::all)
+                for (; at > 0 && enter[order[at - 1]] < enter[c]; --at) order[at] = order[at - 1];
             order[at] = c;
         }
         for (int i = 0; i < n; ++i) {

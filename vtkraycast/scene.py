@@ -726,10 +726,12 @@ class Scene:
         >>> hits["ray_splits"].tolist(), hits["t"].tolist()  # the second ray meets an edge
         ([0, 2, 4], [1.5, 2.5, 1.5, 2.5])
         """
-        (ray, triangle, t, weights), n, (k, j) = self._crossings(origins, directions, tmin, tmax, threads, False)
+        (splits, ray, triangle, t, weights), _, (k, j) = self._crossings(
+            origins, directions, tmin, tmax, threads, False
+        )
         shift_lengths(t, (k - j[ray]) if np.ndim(j) else k - j, "t")
         return {
-            "ray_splits": np.searchsorted(ray, np.arange(n + 1)).astype(np.int64),
+            "ray_splits": splits,
             "ray_ids": ray,
             "triangle_id": triangle,
             "cell_id": self._mesh.cell_ids[triangle],
@@ -741,14 +743,14 @@ class Scene:
         self, origins: Any, directions: Any, tmin: float, tmax: float, threads: int | None, counts_only: bool
     ) -> tuple[tuple[np.ndarray, ...], Any, tuple]:
         """The core's crossings of the rays (checked and scaled as :meth:`intersect`'s, tested
-        exactly), and the batch size or shape (counts_only) and the length shifts."""
+        exactly), the batch shape and the length shifts."""
         request, shape, shifts = self._ray_request(
             origins, directions, tmin, tmax, "watertight", "float64", "bvh", threads, False
         )
         found = _core.intersect_all(
             self._core, request.origins, request.directions, request.tmin, request.tmax, request.threads, counts_only
         )
-        return found, shape if counts_only else request.origins.shape[0], shifts
+        return found, shape, shifts
 
     def count_intersections(
         self, origins: Any, directions: Any, *, tmin: float = 0.0, tmax: float = math.inf, threads: int | None = None
