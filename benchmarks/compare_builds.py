@@ -7,7 +7,7 @@ ratios where separate runs minutes apart cannot resolve it.
     (change the core)
     pip install --no-build-isolation --no-deps . --target /tmp/after -Cbuild-dir=/tmp/build-after
     python benchmarks/compare_builds.py /tmp/before /tmp/after [--rounds 60] [--threads 2]
-        [--scene frog|channels|terrain|bumpy|small|sphere|ant] [--view framed|close|full|lidar|rays]
+        [--scene frog|channels|terrain|bumpy|small|sphere|ant] [--view framed|close|full|lidar|rays|crossings]
         [--flat] [--pixels 1024]
         [--arrays ids|geometry|default] [--cold]
 
@@ -25,7 +25,9 @@ default geometry (``geometry``: interpolate=False), the defaults with the mesh's
 array cast. ``--view lidar`` times ``Scene.scan`` of benchmarks/sensors.py's 64 x 2048
 lidar instead, comparing range images; ``--view rays`` times ``Scene.intersect`` (its default
 arrays) of benchmarks/rays.py's rays from outside (500,000; ``--rays``), comparing triangle
-ids; the sphere scene is rays.py's 20 k-triangle bumpy sphere, the ant pyvista's.
+ids; ``--view crossings`` times ``Scene.intersect_all`` of visibility.py's random rays
+(origins in the mesh's box, random directions; ``--rays``), comparing the crossings' t.
+The sphere scene is rays.py's 20 k-triangle bumpy sphere, the ant pyvista's.
 ``--cold`` writes over 64 MB before each cast, as another caster run in between would
 (peers.py's alternated pairs), so the cast finds its scene out of cache.
 """
@@ -71,6 +73,11 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
         import rays
 
         origins, directions, _ = rays.ray_sets(scene, args.rays, np.random.default_rng(7))["from outside"]
+    elif args.view == "crossings":
+        rng = np.random.default_rng(0)
+        points = scene.prepared.points
+        origins = rng.uniform(points.min(axis=0), points.max(axis=0), (args.rays, 3))
+        directions = rng.normal(size=(args.rays, 3))
     elif args.view == "lidar":
         import sensors
 
@@ -83,6 +90,8 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
     def cast() -> np.ndarray:
         if args.view == "rays":
             return scene.intersect(origins, directions, threads=args.threads)["triangle_id"]
+        if args.view == "crossings":
+            return scene.intersect_all(origins, directions, threads=args.threads)["t"]
         if args.view == "lidar":
             return scene.scan(camera, range_image=True, threads=args.threads)[1]
         return np.asarray(scene.cast(camera, threads=args.threads, **options)[compared])
@@ -106,8 +115,8 @@ def main() -> None:
     parser.add_argument(
         "--scene", choices=["frog", "channels", "terrain", "bumpy", "small", "sphere", "ant"], default="frog"
     )
-    parser.add_argument("--view", choices=["framed", "close", "full", "lidar", "rays"], default="framed")
-    parser.add_argument("--rays", type=int, default=500_000, help="rays of --view rays")
+    parser.add_argument("--view", choices=["framed", "close", "full", "lidar", "rays", "crossings"], default="framed")
+    parser.add_argument("--rays", type=int, default=500_000, help="rays of --view rays and crossings")
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")
     parser.add_argument("--pixels", type=int, default=1024)
     parser.add_argument(
@@ -146,6 +155,7 @@ def main() -> None:
     what = {
         "lidar": "64 x 2048 beams, scan's arrays",
         "rays": f"{args.rays:,} rays from outside, intersect's arrays",
+        "crossings": f"{args.rays:,} random rays, intersect_all",
     }.get(args.view, f"{n}x{n}, arrays: {args.arrays}")
     print(
         f"{args.scene} ({args.view}){' (flat)' if args.flat else ''}, {what}, {args.threads} threads, "

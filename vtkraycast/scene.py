@@ -776,7 +776,9 @@ class Scene:
         edges and whatever the triangles' orientation: the parity of the surface crossings
         (:meth:`intersect_all`) along a ray from the point. Points on the surface count as
         inside. The mesh must be closed (every edge shared by an even number of triangles),
-        else a ValueError: inside has no meaning for an open surface.
+        else a ValueError: inside has no meaning for an open surface. Batches of 4096 points
+        or more are answered through a grid of cells made once per scene, most points by a
+        lookup, the others by a short segment (docs/visibility.md): the same answers.
 
         Examples
         --------
