@@ -433,12 +433,10 @@ VRC_NB_MODULE(VRC_MODULE, m) {
             [](vrc::InsideGrid* grid, Points points, Triangles triangles, std::array<double, 3> low,
                std::array<double, 3> high, int per_axis) {
                 nb::gil_scoped_release release;
-                new (grid) vrc::InsideGrid(points.data(), points.shape(0), triangles.data(), triangles.shape(0), low,
-                                           high, per_axis);
+                new (grid) vrc::InsideGrid(points.data(), triangles.data(), triangles.shape(0), low, high, per_axis);
             },
             "points"_a, "triangles"_a, "low"_a, "high"_a, "per_axis"_a)
         .def_prop_ro("usable", &vrc::InsideGrid::usable)
-        .def_prop_ro("shape", &vrc::InsideGrid::shape)
         .def(
             "region_points",
             [](const vrc::InsideGrid& grid) {

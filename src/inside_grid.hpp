@@ -9,8 +9,9 @@
 // Exactness rests on the cells' bounds being those the lookups use: a coordinate's cell is
 // floor((x - low) * inv_h) in floating point, monotonic in x, so each cell is an interval
 // of the reals per axis and a box in space (convex), and a triangle's points lie in the
-// cells of its bounding box's corners and those between. Segment ends are placed well
-// inside their cell (checked), so rounding the segment's direction cannot move its end out.
+// cells of its bounding box's corners and those between. Segment ends sit a third of a
+// cell inside theirs, far more than the roundings of the cells' bounds and of the segment's
+// direction where the grid is usable (cells wider than 2^-30 of the coordinates).
 #pragma once
 
 #include <algorithm>
@@ -28,7 +29,7 @@ public:
 
     /// A grid of cubic cells over the box [low, high] of `points`, about `per_axis` along
     /// its longest side (at most 256); triangles given by point indices.
-    InsideGrid(const double* points, std::size_t n_points, const uint32_t* triangles, std::size_t n_triangles,
+    InsideGrid(const double* points, const uint32_t* triangles, std::size_t n_triangles,
                const std::array<double, 3>& low, const std::array<double, 3>& high, int per_axis)
         : low_(low), high_(high) {
         const double extent = std::max({high[0] - low[0], high[1] - low[1], high[2] - low[2]});
@@ -36,7 +37,7 @@ public:
         h_ = 1.0 / inv_h_;
         for (int c = 0; c < 3; ++c) n_[c] = axis_cell(high[c], c) + 1;
         label_.assign(std::size_t(n_[0]) * std::size_t(n_[1]) * std::size_t(n_[2]), kUnset);
-        mark_triangles(points, n_points, triangles, n_triangles);
+        mark_triangles(points, triangles, n_triangles);
         label_empty_regions();
         point_to_nearest_empty();
     }
@@ -85,8 +86,6 @@ public:
         }
     }
 
-    std::array<int32_t, 3> shape() const { return {n_[0], n_[1], n_[2]}; }
-
 private:
     static constexpr int32_t kUnset = INT32_MIN;
     static constexpr int32_t kTouched = INT32_MIN + 1;
@@ -103,7 +102,7 @@ private:
         return q;
     }
 
-    void mark_triangles(const double* points, std::size_t, const uint32_t* triangles, std::size_t n_triangles) {
+    void mark_triangles(const double* points, const uint32_t* triangles, std::size_t n_triangles) {
         for (std::size_t t = 0; t < n_triangles; ++t) {
             int32_t lo[3], hi[3];
             for (int c = 0; c < 3; ++c) {

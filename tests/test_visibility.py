@@ -129,14 +129,13 @@ def test_contains_on_a_grid_aligned_with_the_mesh(contains_by):
     assert inside.shape == (len(grid),)
 
 
-def _shells() -> tuple[pv.PolyData, np.ndarray]:
+def _shells() -> pv.PolyData:
     """A bumpy shell around a cavity (an inner sphere facing inwards) and a separate small
-    sphere: three regions of empty cells at least, answers that differ between them; and
-    the centres of the three surfaces."""
+    sphere: three regions of empty cells at least, answers that differ between them."""
     outer = bumpy_sphere(4)
     cavity = pv.Icosphere(radius=0.45, nsub=3).flip_faces()
     apart = pv.Icosphere(radius=0.3, center=(2.2, 0.3, -0.1), nsub=2)
-    return outer + cavity + apart, np.array([[0.0, 0, 0], [0, 0, 0], [2.2, 0.3, -0.1]])
+    return outer + cavity + apart
 
 
 @pytest.mark.parametrize(
@@ -147,7 +146,7 @@ def test_contains_over_every_cell_of_the_grid_equals_the_winding_number(offset, 
     # roundings) and beside every vertex, with half the triangles flipped (parity does
     # not care; the winding number is taken on the mesh as made). Far from the origin
     # for its size the grid cannot place points safely in its cells: rays answer.
-    mesh, _ = _shells()
+    mesh = _shells()
     points, triangles = mesh.points.astype(np.float64), mesh.regular_faces.astype(np.int64)
     rng = np.random.default_rng(11)
     flipped = triangles.copy()

@@ -40,12 +40,12 @@ RAY_ARRAYS = {
     "composite_index": "CompositeIndex",
 }
 DEFAULT_RAY_ARRAYS = ("triangle_id", "cell_id", "t", "barycentric")
-#: Refuse images whose output arrays alone would exceed this many bytes.
 # contains answers batches of at least this many points with a grid of cells (about
 # _GRID_CELLS_PER_TRIANGLE a triangle), made once per scene.
 _GRID_POINTS = 4096
 _GRID_CELLS_PER_TRIANGLE = 2.0
 _GRID_MOST_PER_AXIS = 128
+#: Refuse images whose output arrays alone would exceed this many bytes.
 _MAX_OUTPUT_BYTES = int(os.environ.get("VTKRAYCAST_MAX_OUTPUT_BYTES", 16 * 2**30))
 
 
@@ -821,9 +821,9 @@ class Scene:
 
     def _inside_grid(self, points: int) -> _core.InsideGrid | None:
         """contains' grid of cells (src/inside_grid.hpp), made at the first batch large enough
-        to repay it (about two cells per triangle, at most 128 along the box's longest side: the
-        cells' lookups stay in the caches);
-        None where the grid cannot answer (a box far from the origin for its size)."""
+        to repay it (about two cells a triangle, at most 128 along the box's longest side, so
+        that the lookups stay in the caches); None where the grid cannot answer (no empty
+        cell, or a box far from the origin for its size)."""
         if self._grid is None and points >= _GRID_POINTS:
             mesh = self._mesh
             per_axis = int(
