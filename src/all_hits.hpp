@@ -4,6 +4,7 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -99,16 +100,18 @@ struct CrossingSink {
 };
 
 /// The crossings of rays 0 .. n - 1 within [tmin, tmax], each ray's sorted by t:
-/// `each(part, k, hits)` is called once per ray k from worker `part`, which takes a slice
-/// of the rays (slices in increasing order of the ray; within one, rays in any order: a
-/// scene larger than the caches traces several at a time, trace_rays_interleaved).
+/// `each(part, k, hits)` is called once per ray k from worker `part`. Workers take chunks
+/// of consecutive rays as they finish the last (a shared machine slows one core or the
+/// other: halves fixed in advance made the call wait for the slower), and within a chunk
+/// rays finish in any order (a scene larger than the caches traces several at a time,
+/// trace_rays_interleaved).
 template <class Each>
 void for_each_crossings(const Scene& scene, const ArrayRays& rays, unsigned threads, Each&& each) {
     const std::size_t n = rays.size();
     const unsigned parts = std::max(1u, std::min<unsigned>(threads, unsigned(n / 4096 + 1)));
     const bool interleave = scene.ray_bytes() >= kInterleavedBytes;
+    std::atomic<std::size_t> next_chunk{0};
     auto work = [&](unsigned p) {
-        const std::size_t begin = n * p / parts, end = n * (p + 1) / parts;
         CrossingSink sinks[kInFlight];
         for (CrossingSink& sink : sinks) sink.scene = &scene;
         auto finish = [&](CrossingSink& sink) {
@@ -116,9 +119,9 @@ void for_each_crossings(const Scene& scene, const ArrayRays& rays, unsigned thre
             each(p, std::size_t(sink.k), sink.hits);
         };
         std::vector<std::size_t> chunk;
-        for (std::size_t first = begin; first < end; first += ArrayRays::kChunk) {
+        for (std::size_t first; (first = next_chunk.fetch_add(1) * ArrayRays::kChunk) < n;) {
             chunk.clear();
-            for (std::size_t k = first; k < std::min(end, first + ArrayRays::kChunk); ++k) chunk.push_back(k);
+            for (std::size_t k = first; k < std::min(n, first + ArrayRays::kChunk); ++k) chunk.push_back(k);
             if (interleave && !coherent(scene, rays, chunk)) {
                 trace_rays_interleaved<Watertight, double, HitPolicy::all>(
                     scene, rays, chunk, CastContext{},
@@ -164,8 +167,8 @@ struct CrossingScratch {
     }
 };
 
-/// The workers keep their rays' crossings as found (a slice's rays may finish in any
-/// order), with each ray's place among them; the counts' running sum then places every
+/// The workers keep their rays' crossings as found (rays finish in any order), with
+/// each ray's place among them; the counts' running sum then places every
 /// ray's rows, and the rows are copied there in parallel: no sort.
 inline CrossingList list_crossings(const Scene& scene, const ArrayRays& rays, unsigned threads) {
     static std::mutex kept_lock;
