@@ -63,6 +63,31 @@ def test_crossings_carry_their_triangle_cell_and_weights():
     np.testing.assert_array_equal(scene.count_intersections(origins, directions) % 2 == 1, inside)
 
 
+def test_crossings_do_not_depend_on_other_calls_or_threads():
+    """The listing's working memory is kept from call to call and shared by concurrent
+    calls in turn: a call after a larger one, and calls from several Python threads at
+    once, list what a lone call lists."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    scene = vrc.Scene(bumpy_sphere(3))
+    rng = np.random.default_rng(5)
+    batches = [(rng.uniform(-2, 2, (n, 3)), rng.normal(size=(n, 3))) for n in (30_000, 9_000, 12_000, 5_000)]
+    alone = [scene.intersect_all(o, d, threads=1) for o, d in batches]
+
+    def same(found, expected):
+        assert found.keys() == expected.keys()
+        for name in expected:
+            np.testing.assert_array_equal(found[name], expected[name])
+
+    for (o, d), expected in zip(batches[::-1], alone[::-1]):  # (the largest first, then smaller)
+        same(scene.intersect_all(o, d, threads=2), expected)
+    with ThreadPoolExecutor(4) as pool:
+        results = list(pool.map(lambda batch: scene.intersect_all(*batch, threads=2), batches * 3))
+    for found, expected in zip(results, alone * 3):
+        same(found, expected)
+    assert sum(len(found["t"]) for found in alone) > 10_000
+
+
 @pytest.mark.parametrize("level", [4, 6])  # 6: beyond the caches, rays traced eight at a time
 def test_counts_agree_with_open3d(level):
     o3d = pytest.importorskip("open3d")
