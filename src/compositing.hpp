@@ -223,6 +223,34 @@ void receive_hits(const uint8_t* messages, const int64_t* bytes, std::size_t sen
         message += bytes[s];
     }
     const auto candidate = [&](double depth, double nearest) { return depth <= nearest + tie * std::fabs(nearest); };
+    if (active.size() == 1) {  // one sender (the whole image on one rank from two): no merge
+        Stream& s = *active.front();
+        for (;;) {
+            const uint32_t place = s.head.place;
+            if (place >= pixels) throw std::runtime_error("a compositing message names a pixel outside the region");
+            if (own && s.next + kRowsAhead < s.n) {  // (own's rows at the places ahead: a cache miss each)
+                uint32_t ahead;
+                std::memcpy(&ahead, s.message + (s.next + kRowsAhead) * sizeof(HitRecord), sizeof ahead);
+                __builtin_prefetch(own->hit + ahead);
+                __builtin_prefetch(own->depth + ahead);
+            }
+            bool wins = true;
+            if (own && own->hit[place]) {
+                const double mine = double(own->depth[place]), nearest = std::min(mine, s.head.depth);
+                wins = candidate(s.head.depth, nearest) &&
+                       (!candidate(mine, nearest) || s.head.key < own->key(int64_t(place)));
+            }
+            if (wins) {
+                s.places.push_back(place);
+                s.from.push_back(s.next);
+                if (depth_out) depth_out[place] = Depth(s.head.depth);
+                if (mask_out) mask_out[place] = 1;
+            }
+            ++s.next;
+            if (!s.load()) break;
+        }
+        active.clear();
+    }
     std::vector<Stream*> group;
     while (!active.empty()) {
         uint32_t place = active.front()->head.place;
