@@ -152,8 +152,9 @@ struct CrossingList {
 
 /// list_crossings' working memory, kept from call to call: grown fresh, the workers' hit
 /// buffers fault in a page per 4 KiB, about 7 % of the time of listing 200,000 random
-/// rays' crossings on a 20 k-triangle scene. One call at a time uses it (others make their own); a call that grew
-/// it past kKeptBytes gives it back (about a million crossings).
+/// rays' crossings on a 20 k-triangle scene. One call at a time uses it (others make
+/// their own); a call that grew it past kKeptBytes gives it back (about a million
+/// crossings).
 struct CrossingScratch {
     std::vector<std::vector<RayHit>> found;  ///< per worker, its rays' crossings as found
     std::vector<uint32_t> part;              ///< per ray, its worker
@@ -167,9 +168,9 @@ struct CrossingScratch {
     }
 };
 
-/// The workers keep their rays' crossings as found (rays finish in any order), with
-/// each ray's place among them; the counts' running sum then places every
-/// ray's rows, and the rows are copied there in parallel: no sort.
+/// The workers keep their rays' crossings as found (rays finish in any order), with each
+/// ray's place among them; the counts' running sum then places every ray's rows, and the
+/// rows are copied there in parallel: no sort.
 inline CrossingList list_crossings(const Scene& scene, const ArrayRays& rays, unsigned threads) {
     static std::mutex kept_lock;
     static CrossingScratch kept;
