@@ -1,6 +1,6 @@
 #!/usr/bin/env python
 """Every crossing, crossing counts and inside/outside against Open3D, on the same queries,
-timed in alternation in one run; trimesh and libigl on a sample.
+timed in alternation in one run; trimesh, libigl and VTK on a sample.
 
     python benchmarks/visibility.py [--rays 200000] [--pairs 7] [--out benchmarks/results]
 
@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import open3d as o3d
+import pyvista as pv
 
 import vtkraycast as vrc
 from vtkraycast.testing import bumpy_sphere
@@ -114,10 +115,22 @@ def _single_thread_peers(name, scene, origins) -> list[tuple]:
     for label, f in (
         ("trimesh contains", lambda: mesh.contains(origins)),
         ("libigl winding number > 0.5", lambda: np.abs(igl.winding_number(mesh.vertices, mesh.faces, origins)) > 0.5),
+        ("VTK vtkSelectEnclosedPoints", lambda: _vtk_enclosed(scene.prepared, origins)),
     ):
         result = f()
         found.append((name, label, n / _time(f) / 1e6, float((np.asarray(result) == inside).mean())))
     return found
+
+
+def _vtk_enclosed(mesh, points) -> np.ndarray:
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkFiltersModeling import vtkSelectEnclosedPoints
+
+    select = vtkSelectEnclosedPoints()
+    select.SetInputData(pv.PolyData(points))
+    select.SetSurfaceData(pv.PolyData.from_regular_faces(mesh.points, mesh.triangles))
+    select.Update()
+    return vtk_to_numpy(select.GetOutput().GetPointData().GetArray("SelectedPoints")).astype(bool)
 
 
 def _write(args, rows, singles) -> None:

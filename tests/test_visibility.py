@@ -1,7 +1,7 @@
 """Every crossing along a ray, crossing counts and inside/outside (Scene.intersect_all,
 count_intersections, contains): exact on rays through every vertex and edge of closed
 meshes, against geometry (a convex mesh is crossed twice by any line through its
-interior), libigl's winding number and Open3D."""
+interior), libigl's winding number, VTK's vtkSelectEnclosedPoints and Open3D."""
 
 from __future__ import annotations
 
@@ -140,6 +140,28 @@ def test_contains_equals_libigl_winding_number(flip, contains_by):
     winding = igl.winding_number(points, triangles, queries)
     expected = np.abs(winding) > 0.5
     np.testing.assert_array_equal(scene.contains(queries), expected)
+
+
+def test_contains_agrees_with_vtk_select_enclosed_points(contains_by):
+    """VTK's vtkSelectEnclosedPoints votes over rays cast with a tolerance, so it is asked
+    only about points clear of the surface (beyond 1 % of the mesh's size, by VTK's own
+    implicit distance): there the answers must be the same."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkFiltersModeling import vtkSelectEnclosedPoints
+
+    mesh = bumpy_sphere(4)
+    rng = np.random.default_rng(11)
+    points = pv.PolyData(rng.uniform(-1.2, 1.2, (3000, 3)))
+    clear = np.abs(points.compute_implicit_distance(mesh)["implicit_distance"]) > 0.03
+    select = vtkSelectEnclosedPoints()
+    select.SetInputData(points)
+    select.SetSurfaceData(mesh)
+    select.SetTolerance(1e-6)
+    select.Update()
+    theirs = vtk_to_numpy(select.GetOutput().GetPointData().GetArray("SelectedPoints")).astype(bool)
+    ours = vrc.Scene(mesh).contains(points.points)
+    assert clear.sum() > 2500 and 0.2 < theirs[clear].mean() < 0.8
+    np.testing.assert_array_equal(ours[clear], theirs[clear])
 
 
 def test_contains_on_a_grid_aligned_with_the_mesh(contains_by):
