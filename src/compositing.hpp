@@ -88,21 +88,23 @@ class Region {
 /// others'): the copies fetch this many rows ahead.
 constexpr std::size_t kRowsAhead = 64;
 
+/// Which rows a copy fetches ahead: those it reads, those it writes, or both.
+enum Fetch : unsigned { kFetchSource = 1, kFetchTarget = 2 };
+
 /// Copies n rows of `width` bytes, row from(k) of `source` to row to(k) of `target` for
-/// k = 0 .. n - 1, fetching row from(k + kRowsAhead) (or, `into`, to(k + kRowsAhead))
-/// first. The common widths get a loop of their own, whose fixed-size copies the compiler
-/// turns into a few moves.
+/// k = 0 .. n - 1, fetching the rows `fetch` names kRowsAhead rows ahead first. The
+/// common widths get a loop of their own, whose fixed-size copies the compiler turns into
+/// a few moves.
 template <class From, class To>
-void copy_rows(std::size_t width, const uint8_t* source, uint8_t* target, std::size_t n, From from, To to, bool into) {
+void copy_rows(std::size_t width, const uint8_t* source, uint8_t* target, std::size_t n, From from, To to,
+               unsigned fetch) {
     auto loop = [&](auto fixed) {
         constexpr std::size_t kWidth = decltype(fixed)::value;
         const std::size_t w = kWidth ? kWidth : width;
         for (std::size_t k = 0; k < n; ++k) {
             if (k + kRowsAhead < n) {
-                if (into)
-                    __builtin_prefetch(target + to(k + kRowsAhead) * w, 1);
-                else
-                    __builtin_prefetch(source + from(k + kRowsAhead) * w);
+                if (fetch & kFetchTarget) __builtin_prefetch(target + to(k + kRowsAhead) * w, 1);
+                if (fetch & kFetchSource) __builtin_prefetch(source + from(k + kRowsAhead) * w);
             }
             std::memcpy(target + to(k) * w, source + from(k) * w, w);
         }
@@ -174,11 +176,48 @@ void send_hits(const Hits<Depth>& hits, const std::vector<Region>& regions, cons
         for (const Rows& a : arrays) {
             copy_rows(
                 a.width, a.data, rows, n, [&](std::size_t k) { return std::size_t(pixels[k]); },
-                [](std::size_t k) { return k; }, false);
+                [](std::size_t k) { return k; }, kFetchSource);
             rows += n * a.width;
         }
         message += n * row_bytes;
     }
+}
+
+/// Whether a hit at `depth` is within the tie tolerance of the nearest hit's depth.
+inline bool is_candidate(double depth, double nearest, double tie) { return depth <= nearest + tie * std::fabs(nearest); }
+
+/// The serial cast's rule at one pixel: of own hit (when `mine`, at `own_depth`) and the
+/// others' (`n` depths, in rank order), the least depth wins, and among the hits within
+/// the tie tolerance of it (the same point reached through two triangles) the lowest key,
+/// own first on equal keys (a triangle two ranks hold), then the first in order. Keys are
+/// asked for only where two hits tie. Returns the winning other's index, -1 when own hit
+/// wins or there is none.
+template <class OwnKey, class Key>
+[[gnu::always_inline]] inline int pick_winner(bool mine, double own_depth, const double* depths, std::size_t n, double tie, OwnKey own_key, Key key) {
+    double nearest = mine ? own_depth : HUGE_VAL;
+    for (std::size_t k = 0; k < n; ++k) nearest = std::min(nearest, depths[k]);
+    const bool own_candidate = mine && is_candidate(own_depth, nearest, tie);
+    std::size_t candidates = own_candidate;
+    for (std::size_t k = 0; k < n; ++k) candidates += is_candidate(depths[k], nearest, tie);
+    int winner = -1;
+    if (candidates == 1 && !own_candidate) {
+        for (std::size_t k = 0; k < n; ++k)
+            if (is_candidate(depths[k], nearest, tie)) winner = int(k);
+    } else if (candidates > 1) {
+        int64_t least = own_candidate ? own_key() : std::numeric_limits<int64_t>::max();
+        for (std::size_t k = 0; k < n; ++k)
+            if (is_candidate(depths[k], nearest, tie) && key(k) < least) least = key(k), winner = int(k);
+    }
+    return winner;
+}
+
+/// pick_winner with one other hit at the pixel: whether it wins.
+template <class OwnKey, class Key>
+[[gnu::always_inline]] inline bool other_wins(bool mine, double own_depth, double depth, double tie, OwnKey own_key,
+                                              Key key) {
+    if (!mine) return true;
+    const double nearest = std::min(own_depth, depth);
+    return is_candidate(depth, nearest, tie) && (!is_candidate(own_depth, nearest, tie) || key() < own_key());
 }
 
 /// The receiver's side: keeps, for every pixel that received hits (`messages`, as
@@ -222,7 +261,6 @@ void receive_hits(const uint8_t* messages, const int64_t* bytes, std::size_t sen
         if (streams[s].load()) active.push_back(&streams[s]);
         message += bytes[s];
     }
-    const auto candidate = [&](double depth, double nearest) { return depth <= nearest + tie * std::fabs(nearest); };
     if (active.size() == 1) {  // one sender (the whole image on one rank from two): no merge
         Stream& s = *active.front();
         for (;;) {
@@ -234,13 +272,10 @@ void receive_hits(const uint8_t* messages, const int64_t* bytes, std::size_t sen
                 __builtin_prefetch(own->hit + ahead);
                 __builtin_prefetch(own->depth + ahead);
             }
-            bool wins = true;
-            if (own && own->hit[place]) {
-                const double mine = double(own->depth[place]), nearest = std::min(mine, s.head.depth);
-                wins = candidate(s.head.depth, nearest) &&
-                       (!candidate(mine, nearest) || s.head.key < own->key(int64_t(place)));
-            }
-            if (wins) {
+            const bool mine = own && own->hit[place];
+            if (other_wins(
+                    mine, mine ? double(own->depth[place]) : 0.0, s.head.depth, tie,
+                    [&] { return own->key(int64_t(place)); }, [&] { return s.head.key; })) {
                 s.places.push_back(place);
                 s.from.push_back(s.next);
                 if (depth_out) depth_out[place] = Depth(s.head.depth);
@@ -252,6 +287,7 @@ void receive_hits(const uint8_t* messages, const int64_t* bytes, std::size_t sen
         active.clear();
     }
     std::vector<Stream*> group;
+    std::vector<double> depths;
     while (!active.empty()) {
         uint32_t place = active.front()->head.place;
         for (const Stream* s : active) place = std::min(place, s->head.place);
@@ -260,20 +296,12 @@ void receive_hits(const uint8_t* messages, const int64_t* bytes, std::size_t sen
         for (Stream* s : active)
             if (s->head.place == place) group.push_back(s);
         const bool mine = own && own->hit[place];
-        double nearest = mine ? double(own->depth[place]) : HUGE_VAL;
-        for (const Stream* s : group) nearest = std::min(nearest, s->head.depth);
-        const bool own_candidate = mine && candidate(double(own->depth[place]), nearest);
-        int candidates = own_candidate;
-        for (const Stream* s : group) candidates += candidate(s->head.depth, nearest);
-        Stream* winner = nullptr;
-        if (candidates == 1 && !own_candidate) {
-            for (Stream* s : group)
-                if (candidate(s->head.depth, nearest)) winner = s;
-        } else if (candidates > 1) {
-            int64_t key = own_candidate ? own->key(int64_t(place)) : std::numeric_limits<int64_t>::max();
-            for (Stream* s : group)  // (the first sender of the lowest key: a triangle two ranks hold)
-                if (candidate(s->head.depth, nearest) && s->head.key < key) key = s->head.key, winner = s;
-        }
+        depths.clear();
+        for (const Stream* s : group) depths.push_back(s->head.depth);
+        const int w = pick_winner(
+            mine, mine ? double(own->depth[place]) : 0.0, depths.data(), group.size(), tie,
+            [&] { return own->key(int64_t(place)); }, [&](std::size_t k) { return group[k]->head.key; });
+        Stream* winner = w < 0 ? nullptr : group[std::size_t(w)];
         if (winner) {
             winner->places.push_back(place);
             winner->from.push_back(winner->next);
@@ -291,9 +319,89 @@ void receive_hits(const uint8_t* messages, const int64_t* bytes, std::size_t sen
         for (const Rows& a : arrays) {
             copy_rows(
                 a.width, rows, a.data, s.places.size(), [&](std::size_t k) { return s.from[k]; },
-                [&](std::size_t k) { return std::size_t(s.places[k]); }, true);
+                [&](std::size_t k) { return std::size_t(s.places[k]); }, kFetchTarget);
             rows += s.n * a.width;
         }
+    }
+}
+
+/// Another rank's full-frame image, read where it lies (memory the ranks of a node share):
+/// its hits and the rows of its other output arrays, in the receiver's order.
+template <class Depth>
+struct Frame {
+    Hits<Depth> hits;
+    std::vector<Rows> rows;
+};
+
+/// The pixels [0, pixels) where any of `masks` is set, ascending.
+inline void any_hit_pixels(const std::vector<const uint8_t*>& masks, std::size_t pixels, std::vector<int64_t>& out) {
+    if (masks.size() == 1) return hit_pixels(masks[0], 0, int64_t(pixels), out);
+    std::vector<uint8_t> any(pixels, 0);  // (more than two ranks on a node: their masks joined first)
+    for (const uint8_t* mask : masks)
+        for (std::size_t p = 0; p < pixels; ++p) any[p] |= mask[p];
+    hit_pixels(any.data(), 0, int64_t(pixels), out);
+}
+
+/// The whole image on one rank of a node, from the other ranks' full-frame images in shared
+/// memory (no message: nothing is gathered or moved but the winners' rows): keeps, per
+/// pixel, the hit the serial cast keeps (pick_winner) among `own`'s and the others', and
+/// writes the winners' rows into `arrays`, their depth into `depth_out` and 1 into
+/// `mask_out`, which are own's full-frame arrays (own's hits are read at a pixel before
+/// it is written).
+template <class Depth>
+void merge_frames(const Hits<Depth>& own, const std::vector<Frame<Depth>>& others, double tie,
+                  const std::vector<Rows>& arrays, Depth* depth_out, uint8_t* mask_out) {
+    if (others.empty()) return;
+    std::vector<const uint8_t*> masks;
+    for (const Frame<Depth>& f : others) masks.push_back(f.hits.hit);
+    std::vector<int64_t> pixels;
+    any_hit_pixels(masks, own.pixels, pixels);
+    std::vector<std::vector<int64_t>> won(others.size());  // (each other's winning pixels)
+    std::vector<double> depths;
+    std::vector<std::size_t> from;
+    const auto merge = [&](auto decide) {  // decide(p): the other whose hit wins at pixel p, or -1
+        for (std::size_t k = 0; k < pixels.size(); ++k) {
+            if (k + kRowsAhead < pixels.size()) {  // (the frames' rows at the pixels ahead: a cache miss each)
+                const int64_t ahead = pixels[k + kRowsAhead];
+                __builtin_prefetch(own.hit + ahead);
+                __builtin_prefetch(own.depth + ahead);
+                for (const Frame<Depth>& f : others) __builtin_prefetch(f.hits.depth + ahead);
+            }
+            const int64_t p = pixels[k];
+            const int s = decide(p);
+            if (s < 0) continue;
+            won[std::size_t(s)].push_back(p);
+            depth_out[p] = others[std::size_t(s)].hits.depth[p];
+            mask_out[p] = 1;
+        }
+    };
+    if (others.size() == 1) {  // (two ranks on the node: two hits compared)
+        const Hits<Depth>& o = others[0].hits;
+        merge([&](int64_t p) {
+            const bool mine = own.hit[p] != 0;
+            return other_wins(
+                       mine, mine ? double(own.depth[p]) : 0.0, double(o.depth[p]), tie, [&] { return own.key(p); },
+                       [&] { return o.key(p); })
+                       ? 0
+                       : -1;
+        });
+    } else {
+        merge([&](int64_t p) {
+            depths.clear(), from.clear();
+            for (std::size_t s = 0; s < others.size(); ++s)
+                if (others[s].hits.hit[p]) depths.push_back(double(others[s].hits.depth[p])), from.push_back(s);
+            const bool mine = own.hit[p] != 0;
+            const int w = pick_winner(
+                mine, mine ? double(own.depth[p]) : 0.0, depths.data(), depths.size(), tie, [&] { return own.key(p); },
+                [&](std::size_t k) { return others[from[k]].hits.key(p); });
+            return w < 0 ? -1 : int(from[std::size_t(w)]);
+        });
+    }
+    for (std::size_t s = 0; s < others.size(); ++s) {
+        const auto at = [&](std::size_t k) { return std::size_t(won[s][k]); };
+        for (std::size_t a = 0; a < arrays.size(); ++a)
+            copy_rows(arrays[a].width, others[s].rows[a].data, arrays[a].data, won[s].size(), at, at,
+                      kFetchSource | kFetchTarget);
     }
 }
 

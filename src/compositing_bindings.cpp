@@ -93,6 +93,34 @@ void receive(In<uint8_t> messages, In<int64_t> bytes, std::optional<In<uint8_t>>
                       depth_out ? depth_out->data() : nullptr, mask_out ? mask_out->data() : nullptr, pixels);
 }
 
+template <class Depth>
+void merge(In<uint8_t> hit, In<int64_t> triangle, Mutable<Depth> depth, In<int64_t> keys, std::vector<In<uint8_t>> hits,
+           std::vector<In<int64_t>> triangles, std::vector<In<Depth>> depths, std::vector<In<int64_t>> others_keys,
+           std::vector<std::vector<Bytes>> others_arrays, double tie, std::vector<Bytes> arrays, Mutable<uint8_t> mask) {
+    if (triangle.shape(0) != hit.shape(0) || depth.shape(0) != hit.shape(0))
+        throw std::invalid_argument("vtkValidPointMask, TriangleId and Depth differ in length");
+    const cmp::Hits<Depth> own{hit.data(), triangle.data(), depth.data(), hit.shape(0), keys.data(), keys.shape(0)};
+    const std::size_t n = hits.size();
+    if (triangles.size() != n || depths.size() != n || others_keys.size() != n || others_arrays.size() != n)
+        throw std::invalid_argument("every other rank needs its mask, triangles, depths, keys and arrays");
+    const std::vector<cmp::Rows> rows = rows_of(arrays);
+    std::vector<cmp::Frame<Depth>> others;
+    for (std::size_t s = 0; s < n; ++s) {
+        others.push_back({hits_of(hits[s], triangles[s], depths[s], others_keys[s]), rows_of(others_arrays[s])});
+        if (others.back().hits.pixels != own.pixels || others.back().rows.size() != rows.size())
+            throw std::invalid_argument("the ranks' frames differ in size or arrays");
+        for (std::size_t a = 0; a < rows.size(); ++a)
+            if (others.back().rows[a].width != rows[a].width || others.back().rows[a].rows != own.pixels)
+                throw std::invalid_argument("the ranks' frames differ in an array's rows");
+    }
+    for (const cmp::Rows& a : rows)
+        if (a.rows != own.pixels) throw std::invalid_argument("every array needs one row per pixel");
+    if (mask.data() != hit.data() || mask.shape(0) != own.pixels)
+        throw std::invalid_argument("own vtkValidPointMask is written in place");
+    nb::gil_scoped_release release;
+    cmp::merge_frames(own, others, tie, rows, depth.data(), mask.data());
+}
+
 }  // namespace
 
 void bind_compositing(nb::module_& m) {
@@ -116,4 +144,15 @@ void bind_compositing(nb::module_& m) {
     };
     bind_receive(&receive<double>);
     bind_receive(&receive<float>);
+    const char* merge_doc =
+        "Composites into this rank's full-frame arrays (its hits' mask, triangles, depths and keys, and `arrays`, "
+        "written in place) the other ranks' full-frame images (one list entry each, read in memory the ranks of a "
+        "node share): per pixel, the hit the serial cast keeps (least depth, then lowest key within the tie "
+        "tolerance).";
+    auto bind_merge = [&](auto f) {
+        m.def("composite_merge", f, "hit"_a, "triangle_id"_a, "depth"_a, "keys"_a, "hits"_a, "triangle_ids"_a,
+              "depths"_a, "others_keys"_a, "others_arrays"_a, "tie"_a, "arrays"_a, "mask"_a, merge_doc);
+    };
+    bind_merge(&merge<double>);
+    bind_merge(&merge<float>);
 }

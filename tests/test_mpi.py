@@ -1,7 +1,9 @@
 """Casting a mesh distributed over MPI ranks (mpi4py, the ``[mpi]`` extra): the image of N
 ranks equals the serial image of the whole mesh, bit for bit, with pieces cut through the
 mesh (shared edges on different ranks), a rank without triangles, and duplicated
-boundary cells flagged in vtkGhostType. Runs ``mpiexec -n N`` on tests/mpi/cast_pieces.py.
+boundary cells flagged in vtkGhostType; the whole image on rank 0 through the ranks' shared
+memory (and, for "pieces", by direct send), on every rank by direct send. Runs
+``mpiexec -n N`` on tests/mpi/cast_pieces.py.
 """
 
 from __future__ import annotations

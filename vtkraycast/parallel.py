@@ -23,6 +23,7 @@ import numpy as np
 
 from . import _core
 from .fields import miss_value
+from .shared_frames import NodeFrames, segment_bytes
 
 #: The largest message an exchange sends in one piece (a C int counts MPI's bytes).
 MESSAGE_PIECE = 2**30
@@ -36,6 +37,7 @@ __all__ = [
     "communicator",
     "composite",
     "default_threads",
+    "node_frames",
     "triangle_keys",
 ]
 
@@ -150,6 +152,10 @@ class Mpi4pyComm:
         self._comm, self._mpi = comm, MPI
 
     @property
+    def comm(self) -> Any:
+        return self._comm
+
+    @property
     def rank(self) -> int:
         return self._comm.Get_rank()
 
@@ -213,6 +219,12 @@ def communicator(comm: Any) -> VtkController | Mpi4pyComm:
     if hasattr(comm, "Allreduce") and hasattr(comm, "Get_rank"):
         return Mpi4pyComm(comm)
     raise TypeError(f"comm must be an mpi4py communicator or a vtkMultiProcessController, got {type(comm).__name__}")
+
+
+def node_frames(comm: VtkController | Mpi4pyComm) -> NodeFrames | None:
+    """The shared frames of the adapter's communicator when its ranks run on one node
+    (collective on first use; shared_frames.py), else None (direct send)."""
+    return NodeFrames.of(comm.comm) if isinstance(comm, Mpi4pyComm) else None
 
 
 def default_threads(comm: Any) -> int:
@@ -339,6 +351,69 @@ def composite(
         n,
     )
     return out
+
+
+def cast_on_node(
+    frames: NodeFrames,
+    cast: Callable[[dict[str, np.ndarray] | None], dict[str, np.ndarray]],
+    keys: np.ndarray,
+    full: dict[str, tuple[np.dtype, tuple[int, ...]]],
+    layout: dict[str, tuple[np.dtype, tuple[int, ...]]],
+    needed: list[str],
+    root: int,
+    triangles: list[int],
+    pixels: int,
+    tie: float,
+) -> Callable[[], dict[str, np.ndarray] | None]:
+    """A collective cast to ``root`` through the shared memory of one node: every rank but
+    the root casts (``cast(out)``: the ``needed`` arrays into ``out``, new ones for None)
+    straight into its segment of ``frames``, laid out as ``full`` (every array of the cast)
+    after its triangles' ``keys``; the root casts into arrays of its own. Returns the
+    compositing still to do (collective): on the root the image's arrays of ``layout``
+    (its own, the other ranks' winning hits written in), None elsewhere. ``triangles``:
+    each rank's count; ``pixels``: the frame's."""
+    rank, size = frames.comm.Get_rank(), frames.comm.Get_size()
+    frames.reserve([0 if r == root else segment_bytes(full, pixels, triangles[r]) for r in range(size)])
+    if rank != root:
+        held, arrays = frames.arrays(rank, full, pixels, triangles[rank])
+        frames.hold_keys(keys, held)
+        for name, values in arrays.items():
+            if name not in needed:  # (an array this rank lacks: missing at its hits)
+                values[...] = miss_value(name, values.dtype)
+        cast({name: arrays[name] for name in needed})
+
+        def send() -> None:
+            frames.written()
+            frames.read()
+
+        return send
+    buffers = cast(None)
+    rows = [name for name in layout if name not in ("Depth", "vtkValidPointMask")]
+
+    def receive() -> dict[str, np.ndarray]:
+        frames.written()
+        try:
+            out = {name: _full_frame(buffers, name, dtype, row, pixels) for name, (dtype, row) in layout.items()}
+            others = [frames.arrays(r, full, pixels, triangles[r]) for r in range(size) if r != root]
+            _core.composite_merge(
+                buffers["vtkValidPointMask"].view(np.uint8),
+                buffers["TriangleId"],
+                buffers["Depth"],
+                keys,
+                [arrays["vtkValidPointMask"].view(np.uint8) for _, arrays in others],
+                [arrays["TriangleId"] for _, arrays in others],
+                [arrays["Depth"] for _, arrays in others],
+                [held for held, _ in others],
+                [[_row_bytes(arrays[name]) for name in rows] for _, arrays in others],
+                tie,
+                [_row_bytes(out[name]) for name in rows],
+                buffers["vtkValidPointMask"].view(np.uint8),
+            )
+        finally:
+            frames.read()  # (also when the merge failed: the other ranks wait here)
+        return out
+
+    return receive
 
 
 def _full_frame(

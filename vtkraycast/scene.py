@@ -19,7 +19,7 @@ from .fields import GEOMETRY_ARRAYS, allocate, mesh_arrays, output_bytes, reques
 from .image import fill_image, set_arrays
 from .magnitudes import direction_shifts, scene_scale, shift_lengths
 from .mesh import PreparedMesh, prepare_mesh
-from .parallel import Workspace, communicator, composite, default_threads, triangle_keys
+from .parallel import Workspace, cast_on_node, communicator, composite, default_threads, node_frames, triangle_keys
 from .sensors import Lidar, Panorama
 from .visibility import CROSSING_ARRAYS, crossing_arrays, layered_arrays, visible_points
 
@@ -468,6 +468,15 @@ class Scene:
         and the image's arrays on ``root`` (every rank when None; None elsewhere), or, given
         ``extent`` (x0, x1, y0, y1: this rank's block of the image, as VTK's pipeline asks
         for it), that block's arrays on every rank."""
+        camera, composite_now = self._cast_local(camera, root=root, extent=extent, **options)
+        return camera, composite_now()
+
+    def _cast_local(
+        self, camera: Camera | Any, *, root: int | None, extent: tuple[int, int, int, int] | None = None, **options: Any
+    ) -> tuple[Camera, Callable[[], dict[str, np.ndarray] | None]]:
+        """A collective cast's first part (see :meth:`_cast_parallel`): this rank's piece
+        cast at full resolution. Returns the camera and the compositing still to do (a
+        collective call returning what :meth:`_cast_parallel` returns)."""
         comm = self._comm
         if root is not None and not 0 <= root < comm.size:
             raise ValueError(f"root must be a rank (0 to {comm.size - 1}) or None, got {root}")
@@ -476,14 +485,17 @@ class Scene:
         names = select_arrays(found, options.pop("arrays", None), options.pop("interpolate", True))
         real = _precision(options.get("precision", "float64"))
         layout = {name: row_layout(found, name, real) for name in names if name in found.point or name in found.cell}
-        # Every rank's names, array layouts and block, merged in rank order: a rank may lack
-        # a mesh array (an empty piece has none) and still take part.
+        # Every rank's names, array layouts, block and triangles, merged in rank order: a
+        # rank may lack a mesh array (an empty piece has none) and still take part.
         merged: dict[str, tuple] = {}
-        regions = []
-        for rank_names, rank_layout, rank_extent in comm.gather_object((names, layout, extent), None):
+        regions, triangles, layouts = [], [], []
+        gathered = comm.gather_object((names, layout, extent, len(self._mesh.cell_ids)), None)
+        for rank_names, rank_layout, rank_extent, rank_triangles in gathered:
             for name in rank_names:
                 merged.setdefault(name, rank_layout.get(name) or row_layout(found, name, real))
             regions.append(rank_extent)
+            triangles.append(rank_triangles)
+            layouts.append(rank_layout)
         if extent is None:
             whole = (0, camera.nx - 1, 0, camera.ny - 1)
             regions = [whole if root is None or rank == root else None for rank in range(comm.size)]
@@ -497,10 +509,23 @@ class Scene:
             # CellId written as the global cell id, where the input has them.
             ids = self._mesh.global_cell_ids
             self._global_mesh = self._mesh if ids is None else replace(self._mesh, cell_ids=ids[self._mesh.cell_ids])
-        _, buffers = self._cast_into(None, camera, arrays=needed, mesh=self._global_mesh, **options)
         tie = 32 * float(np.finfo(real).eps)  # the kernels' tie window (kTieTolerance, traverse.hpp)
         shape = (camera.ny, camera.nx)
-        return camera, composite(comm, buffers, self._keys, dict(merged), shape, regions, tie, self._work)
+
+        def cast(out: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+            return self._cast_into(None, camera, arrays=needed, mesh=self._global_mesh, out=out, **options)[1]
+
+        # The whole image on one rank, the ranks on one node, every array laid out alike:
+        # through their shared memory (shared_frames.py), else by direct send.
+        alike = all(merged[name] == values for rank_layout in layouts for name, values in rank_layout.items())
+        frames = node_frames(comm) if extent is None and root is not None and alike else None
+        if frames is not None:
+            full = {name: merged.get(name) or row_layout(found, name, real) for name in [*merged, *needed]}
+            return camera, cast_on_node(
+                frames, cast, self._keys, full, merged, needed, root, triangles, camera.nx * camera.ny, tie
+            )
+        buffers = cast()
+        return camera, lambda: composite(comm, buffers, self._keys, dict(merged), shape, regions, tie, self._work)
 
     def _cast_into(
         self,
@@ -508,6 +533,7 @@ class Scene:
         camera: Camera | Any,
         *,
         mesh: PreparedMesh | None = None,
+        out: dict[str, np.ndarray] | None = None,
         world_space: bool = False,
         arrays: Iterable[str] | str | None = None,
         strategy: str = "auto",
@@ -521,7 +547,8 @@ class Scene:
     ) -> tuple[Camera, dict[str, np.ndarray]]:
         """Casts (options as :meth:`cast`) and returns the camera and the output arrays,
         set as ``image``'s point data and geometry when an image is given. ``mesh``: the
-        scene's mesh with other cell ids to write as CellId (the parallel cast's global ids)."""
+        scene's mesh with other cell ids to write as CellId (the parallel cast's global ids);
+        ``out``: the arrays to write, by name (every one of ``arrays``), instead of new ones."""
         if not isinstance(camera, Camera):
             camera = Camera.from_vtk(camera)
         found = mesh_arrays(self._mesh)
@@ -551,7 +578,7 @@ class Scene:
         request.shift_x, request.shift_y = (math.ldexp(float(x), window) for x in camera.shift)
         request.near, request.far = _shifted(camera.near, shift), _shifted(camera.far, shift)
         request.nx, request.ny, request.parallel = camera.nx, camera.ny, camera.parallel
-        buffers = allocate(found, names, n, real, self._outputs)
+        buffers = allocate(found, names, n, real, self._outputs) if out is None else {name: out[name] for name in names}
         request_outputs(request, mesh or self._mesh, found, buffers)
         if image is not None:
             # The image and the arrays the core writes are set up before the cast: Python

@@ -1,0 +1,121 @@
+"""Full-frame images in memory the ranks of one node share (an MPI-3 shared window), for the
+whole image on one rank: each other rank casts straight into its own segment of the window
+and the receiving rank reads their hits where they lie, so nothing is gathered, sent or
+received; only the winners' rows are copied, once (parallel.cast_on_node).
+
+A communicator whose ranks span several nodes, or a VTK controller, keeps direct send
+(parallel.py). Set ``ENABLED = False`` to use direct send everywhere.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+__all__ = ["ENABLED", "NodeFrames"]
+
+#: Whether casts to one rank read the other ranks' images in shared memory where they can.
+ENABLED = True
+
+_ALIGN = 64  # (each array's first row on a cache line of its own)
+_KEY = np.dtype(np.int64)
+
+#: A communicator's frames, by its MPI handle: made once (a collective call) and kept, as
+#: freeing a window is collective too and may only happen inside a collective cast.
+_BY_COMM: dict[int, NodeFrames | None] = {}
+
+Layout = dict[str, tuple[np.dtype, tuple[int, ...]]]
+
+
+def _round_up(n: int) -> int:
+    return -(-n // _ALIGN) * _ALIGN
+
+
+def segment_bytes(layout: Layout, pixels: int, triangles: int) -> int:
+    """Bytes of one rank's segment: its triangles' keys, then a full frame of each array."""
+    total = _round_up(triangles * _KEY.itemsize)
+    for dtype, row in layout.values():
+        total += _round_up(pixels * dtype.itemsize * math.prod(row))
+    return total
+
+
+class NodeFrames:
+    """The shared window of a communicator whose ranks all run on one node, its segments
+    grown as casts need (collectively, inside a cast, where every rank computes the same
+    sizes)."""
+
+    def __init__(self, comm: Any) -> None:
+        from mpi4py import MPI
+
+        self._comm, self._mpi = comm, MPI
+        self._window: Any = None
+        self._sizes: list[int] = []
+        self._keys: np.ndarray | None = None  # (whose keys this rank's segment holds)
+
+    @property
+    def comm(self) -> Any:
+        return self._comm
+
+    @staticmethod
+    def of(comm: Any) -> NodeFrames | None:
+        """The frames of mpi4py communicator ``comm`` (collective on first use), None when
+        its ranks span nodes or shared frames are off."""
+        if not ENABLED:
+            return None
+        from mpi4py import MPI
+
+        handle = comm.py2f()
+        if handle not in _BY_COMM:
+            local = comm.Split_type(MPI.COMM_TYPE_SHARED)
+            one_node = local.Get_size() == comm.Get_size()
+            local.Free()
+            _BY_COMM[handle] = NodeFrames(comm) if one_node else None
+        return _BY_COMM[handle]
+
+    def reserve(self, sizes: list[int]) -> None:
+        """Segments of at least ``sizes[r]`` bytes for each rank r (collective)."""
+        if self._window is not None and all(need <= have for need, have in zip(sizes, self._sizes)):
+            return
+        MPI = self._mpi
+        if self._window is not None:
+            self._window.Unlock_all()
+            self._window.Free()
+        grown = [max(need, have) + need // 4 for need, have in zip(sizes, self._sizes or [0] * len(sizes))]
+        info = MPI.Info.Create()
+        info.Set("alloc_shared_noncontig", "true")  # (each rank's segment in pages of its own)
+        self._window = MPI.Win.Allocate_shared(grown[self._comm.Get_rank()], 1, info, comm=self._comm)
+        info.Free()
+        self._window.Lock_all(MPI.MODE_NOCHECK)
+        self._sizes, self._keys = grown, None
+
+    def arrays(
+        self, rank: int, layout: Layout, pixels: int, triangles: int
+    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Rank ``rank``'s keys and full-frame arrays in its segment (views)."""
+        memory, _ = self._window.Shared_query(rank)
+        segment = np.frombuffer(memory, np.uint8)
+        keys = segment[: triangles * _KEY.itemsize].view(_KEY)
+        at, out = _round_up(triangles * _KEY.itemsize), {}
+        for name, (dtype, row) in layout.items():
+            size = pixels * dtype.itemsize * math.prod(row)
+            out[name] = segment[at : at + size].view(dtype).reshape(pixels, *row)
+            at += _round_up(size)
+        return keys, out
+
+    def hold_keys(self, keys: np.ndarray, segment: np.ndarray) -> None:
+        """Puts this rank's triangle keys in its segment, unless they are there already."""
+        if self._keys is not keys:
+            segment[...] = keys
+            self._keys = keys
+
+    def written(self) -> None:
+        """Every rank's writes to its segment are seen by the others (collective)."""
+        self._window.Sync()
+        self._comm.Barrier()
+        self._window.Sync()
+
+    def read(self) -> None:
+        """The receiving rank is done reading (collective): segments may be written again."""
+        self._comm.Barrier()
