@@ -17,6 +17,10 @@
 #include <type_traits>
 #include <vector>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace vrc::compositing {
 
 /// An array's rows as bytes: `rows` rows of `width` bytes.
@@ -127,17 +131,18 @@ inline std::size_t message_row_bytes(const std::vector<Rows>& arrays) {
     return bytes;
 }
 
-/// The hit pixels of [first, end), ascending, appended to `pixels`.
+/// The hit pixels of [first, end), ascending, appended to `pixels`. Sixteen pixels a step
+/// (the mask is mostly zeros: a frame's misses, or the other ranks' hits), each hit a set
+/// bit of a compare's byte mask: no branch per pixel.
 inline void hit_pixels(const uint8_t* hit, int64_t first, int64_t end, std::vector<int64_t>& pixels) {
     int64_t i = first;
-    for (; i + 8 <= end; i += 8) {  // (eight pixels a step, each hit a set bit: no branch per pixel)
-        uint64_t eight;
-        std::memcpy(&eight, hit + i, 8);
-        eight |= eight >> 4;
-        eight |= eight >> 2;
-        eight |= eight >> 1;
-        for (eight &= 0x0101010101010101ull; eight; eight &= eight - 1) pixels.push_back(i + __builtin_ctzll(eight) / 8);
+#if defined(__SSE2__)
+    for (; i + 16 <= end; i += 16) {
+        const __m128i bytes = _mm_loadu_si128(reinterpret_cast<const __m128i*>(hit + i));
+        unsigned set = ~unsigned(_mm_movemask_epi8(_mm_cmpeq_epi8(bytes, _mm_setzero_si128()))) & 0xffffu;
+        for (; set; set &= set - 1) pixels.push_back(i + __builtin_ctz(set));
     }
+#endif
     for (; i < end; ++i)
         if (hit[i]) pixels.push_back(i);
 }
