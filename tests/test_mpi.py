@@ -136,6 +136,19 @@ def test_ranks_give_the_serial_image(mpi, n, mode, tmp_path):
 
 
 @pytest.mark.parametrize("n", [2, 3])
+def test_a_rank_lacking_arrays_gives_missing_values_at_its_hits(mpi, n, tmp_path):
+    got = _run(mpi, n, "lacking", tmp_path)
+    mesh = torus()
+    serial = vrc.cast(mesh, CAMERA)
+    last = np.isin(serial["CellId"], pieces(mesh, n)[-1]["GlobalIds"])  # (pixels whose hit the last rank holds)
+    assert 0.05 < last.mean() and (~last & (serial["CellId"] >= 0)).mean() > 0.05
+    for name, missing in (("Temperature", np.nan), ("Material", 0)):
+        np.testing.assert_array_equal(got[name], np.where(last, missing, serial[name]), err_msg=name)
+    for name in ("Depth", "CellId", "Label", "Barycentric"):
+        np.testing.assert_array_equal(got[name], serial[name], err_msg=name)
+
+
+@pytest.mark.parametrize("n", [2, 3])
 def test_ties_across_ranks_go_to_the_lowest_global_id(mpi, n, tmp_path):
     got = _run(mpi, n, "twins", tmp_path)
     serial = vrc.cast(twin_planes(), CAMERA)

@@ -4,7 +4,8 @@ Every rank builds the same test mesh (a torus with point and cell arrays, and th
 cell order as global cell ids), keeps its own piece of the cells (rank 0 none when asked:
 a rank without triangles; with ghosts, its neighbours' boundary cells flagged duplicate;
 for "twins", two coincident squares on different ranks; for "pieces", messages sent in
-pieces of 4 KiB, shared memory off; for "float32", cast in that precision), casts it
+pieces of 4 KiB, shared memory off; for "float32", cast in that precision; for
+"lacking", the last rank's piece without two of the arrays), casts it
 with ``vrc.cast(piece, camera, comm=...)`` and the image reaches rank 0 (``root=0``:
 through the ranks' shared memory, as they run on one node) or every rank (``root=None``:
 by direct send); rank 0 writes the arrays.
@@ -29,6 +30,8 @@ if mode == "twins":
     piece = twin_pieces(twin_planes(), comm.size)[comm.rank]
 else:
     piece = pieces(torus(), comm.size, empty_first=mode == "empty_first", ghosts=mode == "ghosts")[comm.rank]
+if mode == "lacking" and comm.rank == comm.size - 1:  # (its hits carry no Temperature and no Material)
+    del piece.point_data["Temperature"], piece.cell_data["Material"]
 before = piece.copy(deep=True)
 options = {"precision": "float32"} if mode == "float32" else {}
 image = vrc.cast(piece, CAMERA, comm=comm, root=0, **options)
