@@ -116,7 +116,16 @@ def _run(mpi: str, n: int, mode: str, tmp_path: Path) -> dict[str, np.ndarray]:
 
 @pytest.mark.parametrize(
     ("n", "mode"),
-    [(2, "cut"), (3, "cut"), (3, "empty_first"), (2, "ghosts"), (3, "ghosts"), (3, "pieces"), (2, "float32")],
+    [
+        (2, "cut"),
+        (3, "cut"),
+        (3, "empty_first"),
+        (2, "ghosts"),
+        (3, "ghosts"),
+        (3, "pieces"),
+        (2, "tight"),
+        (2, "float32"),
+    ],
 )
 def test_ranks_give_the_serial_image(mpi, n, mode, tmp_path):
     got = _run(mpi, n, mode, tmp_path)

@@ -23,7 +23,7 @@ import numpy as np
 
 from . import _core
 from .fields import miss_value
-from .shared_frames import NodeFrames, segment_bytes
+from .shared_frames import NodeFrames
 
 #: The largest message an exchange sends in one piece (a C int counts MPI's bytes).
 MESSAGE_PIECE = 2**30
@@ -361,6 +361,7 @@ def cast_on_node(
     layout: dict[str, tuple[np.dtype, tuple[int, ...]]],
     needed: list[str],
     root: int,
+    sizes: list[int],
     triangles: list[int],
     pixels: int,
     tie: float,
@@ -371,9 +372,10 @@ def cast_on_node(
     after its triangles' ``keys``; the root casts into arrays of its own. Returns the
     compositing still to do (collective): on the root the image's arrays of ``layout``
     (its own, the other ranks' winning hits written in), None elsewhere. ``triangles``:
-    each rank's count; ``pixels``: the frame's."""
+    each rank's count; ``sizes``: each rank's segment's (segment_bytes, 0 for the root);
+    ``pixels``: the frame's."""
     rank, size = frames.comm.Get_rank(), frames.comm.Get_size()
-    frames.reserve([0 if r == root else segment_bytes(full, pixels, triangles[r]) for r in range(size)])
+    frames.reserve(sizes)
     if rank != root:
         held, arrays = frames.arrays(rank, full, pixels, triangles[rank])
         frames.hold_keys(keys, held)

@@ -21,6 +21,7 @@ from .magnitudes import direction_shifts, scene_scale, shift_lengths
 from .mesh import PreparedMesh, prepare_mesh
 from .parallel import Workspace, cast_on_node, communicator, composite, default_threads, node_frames, triangle_keys
 from .sensors import Lidar, Panorama
+from .shared_frames import free_shared_bytes, segment_bytes
 from .visibility import CROSSING_ARRAYS, crossing_arrays, layered_arrays, visible_points
 
 __all__ = ["PRECISIONS", "STRATEGIES", "Scene"]
@@ -488,14 +489,15 @@ class Scene:
         # Every rank's names, array layouts, block and triangles, merged in rank order: a
         # rank may lack a mesh array (an empty piece has none) and still take part.
         merged: dict[str, tuple] = {}
-        regions, triangles, layouts = [], [], []
-        gathered = comm.gather_object((names, layout, extent, len(self._mesh.cell_ids)), None)
-        for rank_names, rank_layout, rank_extent, rank_triangles in gathered:
+        regions, triangles, layouts, free = [], [], [], []
+        gathered = comm.gather_object((names, layout, extent, len(self._mesh.cell_ids), free_shared_bytes()), None)
+        for rank_names, rank_layout, rank_extent, rank_triangles, rank_free in gathered:
             for name in rank_names:
                 merged.setdefault(name, rank_layout.get(name) or row_layout(found, name, real))
             regions.append(rank_extent)
             triangles.append(rank_triangles)
             layouts.append(rank_layout)
+            free.append(rank_free)
         if extent is None:
             whole = (0, camera.nx - 1, 0, camera.ny - 1)
             regions = [whole if root is None or rank == root else None for rank in range(comm.size)]
@@ -515,15 +517,19 @@ class Scene:
         def cast(out: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
             return self._cast_into(None, camera, arrays=needed, mesh=self._global_mesh, out=out, **options)[1]
 
-        # The whole image on one rank, the ranks on one node, every array laid out alike:
-        # through their shared memory (shared_frames.py), else by direct send.
+        # The whole image on one rank, the ranks on one node, every array laid out alike,
+        # room for the frames: through their shared memory (shared_frames.py), else by
+        # direct send.
         alike = all(merged[name] == values for rank_layout in layouts for name, values in rank_layout.items())
         frames = node_frames(comm) if extent is None and root is not None and alike else None
         if frames is not None:
             full = {name: merged.get(name) or row_layout(found, name, real) for name in [*merged, *needed]}
-            return camera, cast_on_node(
-                frames, cast, self._keys, full, merged, needed, root, triangles, camera.nx * camera.ny, tie
-            )
+            pixels = camera.nx * camera.ny
+            sizes = [0 if r == root else segment_bytes(full, pixels, n) for r, n in enumerate(triangles)]
+            if frames.fits(sizes, min(free)):
+                return camera, cast_on_node(
+                    frames, cast, self._keys, full, merged, needed, root, sizes, triangles, pixels, tie
+                )
         buffers = cast()
         return camera, lambda: composite(comm, buffers, self._keys, dict(merged), shape, regions, tie, self._work)
 

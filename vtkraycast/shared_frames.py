@@ -4,23 +4,30 @@ and the receiving rank reads their hits where they lie, so nothing is gathered, 
 received; only the winners' rows are copied, once (parallel.cast_on_node).
 
 A communicator whose ranks span several nodes, or a VTK controller, keeps direct send
-(parallel.py). Set ``ENABLED = False`` to use direct send everywhere.
+(parallel.py), as does a node whose shared-memory file system (``/dev/shm``, where MPI
+keeps the window: a container's is often 64 MiB) has not room for the frames: writing
+beyond it would kill the process. Set ``ENABLED = False`` to use direct send everywhere.
 """
 
 from __future__ import annotations
 
 import math
+import os
 from typing import Any
 
 import numpy as np
 
-__all__ = ["ENABLED", "NodeFrames"]
+__all__ = ["ENABLED", "NodeFrames", "free_shared_bytes", "segment_bytes"]
 
 #: Whether casts to one rank read the other ranks' images in shared memory where they can.
 ENABLED = True
 
 _ALIGN = 64  # (each array's first row on a cache line of its own)
 _KEY = np.dtype(np.int64)
+
+#: Room left on the shared-memory file system beside the frames (MPI's own segments,
+#: other programs).
+HEADROOM = 2**27
 
 #: A communicator's frames, by its MPI handle: made once (a collective call) and kept, as
 #: freeing a window is collective too and may only happen inside a collective cast.
@@ -39,6 +46,15 @@ def segment_bytes(layout: Layout, pixels: int, triangles: int) -> int:
     for dtype, row in layout.values():
         total += _round_up(pixels * dtype.itemsize * math.prod(row))
     return total
+
+
+def free_shared_bytes() -> int:
+    """Bytes free on this node's shared-memory file system (0 when there is none)."""
+    try:
+        stat = os.statvfs("/dev/shm")
+    except OSError:
+        return 0
+    return stat.f_bavail * stat.f_frsize
 
 
 class NodeFrames:
@@ -74,21 +90,34 @@ class NodeFrames:
             _BY_COMM[handle] = NodeFrames(comm) if one_node else None
         return _BY_COMM[handle]
 
+    def fits(self, sizes: list[int], free: int) -> bool:
+        """Whether segments of ``sizes[r]`` bytes for each rank r fit beside ``free`` bytes
+        free (the least any rank saw: every rank decides alike)."""
+        return self._holds(sizes) or sum(self._grown(sizes)) <= free + sum(self._sizes) - HEADROOM
+
     def reserve(self, sizes: list[int]) -> None:
         """Segments of at least ``sizes[r]`` bytes for each rank r (collective)."""
-        if self._window is not None and all(need <= have for need, have in zip(sizes, self._sizes)):
+        if self._holds(sizes):
             return
         MPI = self._mpi
         if self._window is not None:
             self._window.Unlock_all()
             self._window.Free()
-        grown = [max(need, have) + need // 4 for need, have in zip(sizes, self._sizes or [0] * len(sizes))]
+        grown = self._grown(sizes)
         info = MPI.Info.Create()
         info.Set("alloc_shared_noncontig", "true")  # (each rank's segment in pages of its own)
         self._window = MPI.Win.Allocate_shared(grown[self._comm.Get_rank()], 1, info, comm=self._comm)
         info.Free()
         self._window.Lock_all(MPI.MODE_NOCHECK)
         self._sizes, self._keys = grown, None
+
+    def _holds(self, sizes: list[int]) -> bool:
+        return self._window is not None and all(need <= have for need, have in zip(sizes, self._sizes))
+
+    def _grown(self, sizes: list[int]) -> list[int]:
+        """Sizes to allocate for ``sizes``: a quarter more, so that slightly larger casts
+        fit, and never less than now."""
+        return [max(need, have) + need // 4 for need, have in zip(sizes, self._sizes or [0] * len(sizes))]
 
     def arrays(
         self, rank: int, layout: Layout, pixels: int, triangles: int
