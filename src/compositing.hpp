@@ -4,7 +4,9 @@
 // image holds the pixel; each receiver keeps, per pixel, the hit the serial cast would
 // keep. One exchange, and the bytes moved follow the covered pixels, not the frame (the
 // direct-send scheme of sort-last compositing, on sparse images; Moreland et al., "An image
-// compositing solution at scale", SC 2011).
+// compositing solution at scale", SC 2011). When the ranks share a node and the whole image
+// goes to one of them, it reads the others' full frames where they were cast instead
+// (merge_frames; vtkraycast/shared_frames.py).
 #pragma once
 
 #include <algorithm>
@@ -189,7 +191,9 @@ void send_hits(const Hits<Depth>& hits, const std::vector<Region>& regions, cons
 }
 
 /// Whether a hit at `depth` is within the tie tolerance of the nearest hit's depth.
-inline bool is_candidate(double depth, double nearest, double tie) { return depth <= nearest + tie * std::fabs(nearest); }
+inline bool is_candidate(double depth, double nearest, double tie) {
+    return depth <= nearest + tie * std::fabs(nearest);
+}
 
 /// The serial cast's rule at one pixel: of own hit (when `mine`, at `own_depth`) and the
 /// others' (`n` depths, in rank order), the least depth wins, and among the hits within
@@ -198,7 +202,8 @@ inline bool is_candidate(double depth, double nearest, double tie) { return dept
 /// asked for only where two hits tie. Returns the winning other's index, -1 when own hit
 /// wins or there is none.
 template <class OwnKey, class Key>
-[[gnu::always_inline]] inline int pick_winner(bool mine, double own_depth, const double* depths, std::size_t n, double tie, OwnKey own_key, Key key) {
+[[gnu::always_inline]] inline int pick_winner(bool mine, double own_depth, const double* depths, std::size_t n,
+                                              double tie, OwnKey own_key, Key key) {
     double nearest = mine ? own_depth : HUGE_VAL;
     for (std::size_t k = 0; k < n; ++k) nearest = std::min(nearest, depths[k]);
     const bool own_candidate = mine && is_candidate(own_depth, nearest, tie);
