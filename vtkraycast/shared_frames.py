@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+import weakref
 from typing import Any
 
 import numpy as np
@@ -68,7 +69,7 @@ class NodeFrames:
         self._comm, self._mpi = comm, MPI
         self._window: Any = None
         self._sizes: list[int] = []
-        self._keys: np.ndarray | None = None  # (whose keys this rank's segment holds)
+        self._keys: weakref.ref | None = None  # (whose keys this rank's segment holds, not kept alive)
 
     @property
     def comm(self) -> Any:
@@ -135,9 +136,9 @@ class NodeFrames:
 
     def hold_keys(self, keys: np.ndarray, segment: np.ndarray) -> None:
         """Puts this rank's triangle keys in its segment, unless they are there already."""
-        if self._keys is not keys:
+        if self._keys is None or self._keys() is not keys:
             segment[...] = keys
-            self._keys = keys
+            self._keys = weakref.ref(keys)
 
     def written(self) -> None:
         """Every rank's writes to its segment are seen by the others (collective)."""
