@@ -9,7 +9,8 @@ pieces of 4 KiB, shared memory off; for "tight", no room for shared memory; for
 arrays), casts it
 with ``vrc.cast(piece, camera, comm=...)`` and the image reaches rank 0 (``root=0``:
 through the ranks' shared memory, as they run on one node) or every rank (``root=None``:
-by direct send); rank 0 writes the arrays.
+by direct send), and again to the last rank and to rank 0 from one scene; rank 0 writes
+the arrays.
 """
 
 import sys
@@ -38,7 +39,22 @@ if mode == "lacking" and comm.rank == comm.size - 1:  # (its hits carry no Tempe
 before = piece.copy(deep=True)
 options = {"precision": "float32"} if mode == "float32" else {}
 image = vrc.cast(piece, CAMERA, comm=comm, root=0, **options)
-everywhere = vrc.Scene(piece, comm=comm).cast(CAMERA, root=None, arrays=["Depth", "CellId"], **options)
+scene = vrc.Scene(piece, comm=comm)
+everywhere = scene.cast(CAMERA, root=None, arrays=["Depth", "CellId"], **options)
+# The image on the last rank, then on rank 0 again, from one scene (the shared segments
+# change hands): each equals the first.
+last = scene.cast(CAMERA, root=comm.size - 1, **options)
+again = scene.cast(CAMERA, root=0, **options)
+assert (last is not None) == (comm.rank == comm.size - 1) and (again is not None) == (comm.rank == 0)
+if comm.size > 1:
+    if comm.rank == comm.size - 1:
+        comm.send({name: last[name] for name in last.array_names}, dest=0)
+    if comm.rank == 0:
+        last = comm.recv(source=comm.size - 1)
+if comm.rank == 0:
+    for other in (last, again):
+        for name in image.array_names:
+            np.testing.assert_array_equal(other[name], image[name], err_msg=name)
 assert piece == before  # the input is never modified
 # The ranks run on one node: the image reached rank 0 through their shared memory unless
 # that was turned off.
