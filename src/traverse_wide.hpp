@@ -66,7 +66,7 @@ class FloatLanes {
     /// False when the ray is beyond what float slab distances hold without overflow (origin
     /// more than 2^60 from the anchor, a direction component nonzero but below 2^-60 of the
     /// largest, which is in [1, 2)).
-    bool setup(const Ray& ray, const double anchor[3]) {
+    [[gnu::always_inline]] bool setup(const Ray& ray, const double anchor[3]) {
         // The three axes at once in SSE2 lanes (either build): this runs once per ray, and
         // a small scene's ray meets only two or three nodes.
         const __m128d sign_d = _mm_set1_pd(-0.0);
@@ -192,17 +192,24 @@ class WideSearch {
     static_assert(kPolicy != HitPolicy::all || kFiltered, "every hit is found with the watertight kernel");
     struct NoFilter {};
     using Filter = std::conditional_t<kFiltered, TriangleFilter, NoFilter>;
-    static Filter filter_for(const Ray& ray, const Kernel<Real>& kernel) {
-        if constexpr (kFiltered)
-            return TriangleFilter(ray, kernel.shear());
-        else
-            return NoFilter{};
-    }
+    /// The kernel and filter of the ray, made at its first leaf: most of a random ray's
+    /// searches end without one, and making them (the shear's three divisions) cost such
+    /// rays as much as their node tests.
+    struct LeafTests {
+        LeafTests(const Ray& ray, const CastContext& context) : kernel(ray, context), filter(filter_for(ray, kernel)) {}
+        static Filter filter_for(const Ray& ray, const Kernel<Real>& kernel) {
+            if constexpr (kFiltered)
+                return TriangleFilter(ray, kernel.shear());
+            else
+                return NoFilter{};
+        }
+        const Kernel<Real> kernel;
+        const Filter filter;
+    };
 
    public:
     WideSearch(const Scene& scene, const Ray& ray, const CastContext& context, Lanes lanes, Sink* sink = nullptr)
-        : scene_(scene), ray_(ray), kernel_(ray, context), lanes_(lanes), filter_(filter_for(ray, kernel_)), sink_(sink),
-          bound_(ray.tmax) {
+        : scene_(scene), ray_(ray), context_(context), lanes_(lanes), sink_(sink), bound_(ray.tmax) {
         lanes_.set_bound(bound_);
     }
 
@@ -276,25 +283,28 @@ class WideSearch {
 
     /// Tests leaf triangles first .. first + count - 1; true when the search is over (any hit).
     bool leaf(uint32_t first, uint32_t count) {
+        if (!tests_) tests_.emplace(ray_, context_);
+        const Kernel<Real>& kernel = tests_->kernel;
+        const Filter& filter = tests_->filter;
         const double before = bound_;
         const double tmin = ray_.tmin;
         if constexpr (kFiltered) {
             for (uint32_t i = first, end = first + count; i < end; i += 4) {
-                for (unsigned m = filter_.candidates(scene_, i, std::min(4u, end - i), tmin, bound_); m; m &= m - 1) {
+                for (unsigned m = filter.candidates(scene_, i, std::min(4u, end - i), tmin, bound_); m; m &= m - 1) {
                     const uint32_t k = i + __builtin_ctz(m);
                     if constexpr (kPolicy == HitPolicy::all) {
                         double t;
                         Real b[3];
-                        if (kernel_.test(scene_, k, tmin, bound_, t, b)) (*sink_)(k, t, b);
+                        if (kernel.test(scene_, k, tmin, bound_, t, b)) (*sink_)(k, t, b);
                         continue;
                     }
-                    test_triangle(kernel_, scene_, k, tmin, bound_, hit_);
+                    test_triangle(kernel, scene_, k, tmin, bound_, hit_);
                     if (kPolicy == HitPolicy::any && hit_.found()) return true;
                 }
             }
         } else {
             for (uint32_t i = first, end = first + count; i < end; ++i) {
-                test_triangle(kernel_, scene_, i, tmin, bound_, hit_);
+                test_triangle(kernel, scene_, i, tmin, bound_, hit_);
                 if (kPolicy == HitPolicy::any && hit_.found()) return true;
             }
         }
@@ -308,9 +318,9 @@ class WideSearch {
     };
     const Scene& scene_;
     const Ray& ray_;
-    const Kernel<Real> kernel_;
+    const CastContext& context_;
     Lanes lanes_;
-    const Filter filter_;
+    std::optional<LeafTests> tests_;
     Sink* sink_;
     Hit<Real> hit_;
     double bound_;
