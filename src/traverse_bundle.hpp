@@ -128,7 +128,10 @@ class BundleTracer {
         }
         for (int j = 0; j < n_; ++j) kernel_[j].reset(), filter_[j].reset();
         std::fill_n(changed_, n_, false);
-        traverse();
+        if (!traverse()) {  // a bundle costlier than its rays (see traverse): ray by ray after all
+            for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], trace_ray<KernelT, Real>(scene_, ray_[j], context_));
+            return;
+        }
         for (int r = 0; r < rows_; ++r) {  // hits one by one, runs of misses at once
             for (int j = r * cols_, end = (r + 1) * cols_; j < end;) {
                 if (hit_[j].found()) {
@@ -285,7 +288,13 @@ class BundleTracer {
                     v1 < 0 ? v1 / w1 + s : HUGE_VAL};
     }
 
-    void traverse() {
+    /// False, with the tile unfinished, once it has taken more nodes and leaves than
+    /// kVisitsPerRay for each of its rays: rays far apart (a coarse sweep: 64 azimuth steps
+    /// put 90 degrees in one tile) or grazing a height field reach nodes none of them
+    /// enters, and ray by ray costs less than such a bundle.
+    static constexpr int kVisitsPerRay = 4;
+    bool traverse() {
+        int visits = 0;
         struct Pending {
             uint32_t child, count;
             float near;
@@ -298,6 +307,7 @@ class BundleTracer {
         while (top > 0) {
             const Pending e = stack[--top];
             if (e.near > far_limit_) continue;
+            if (++visits > kVisitsPerRay * n_) return false;
             if (e.count) {
                 leaf(e.child, e.count, e.rect, e.nearest);
                 continue;
@@ -337,6 +347,7 @@ class BundleTracer {
                 stack[top++] = {node.child[c], node.count[c], extent[0][c], nearest[c], rects[c]};
             }
         }
+        return true;
     }
 
     /// Tests leaf triangles first .. first + count - 1 on the rays that may meet its box

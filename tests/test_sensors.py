@@ -208,7 +208,13 @@ def _sweep_cases():
 
     # beams at multiples of 45 degrees pass within rounding of the box's edges and corners
     edges = ("box edges", pv.Box(level=3).triangulate(), vrc.Lidar((0, 0, 0), [-45, -35.26438968, 0, 45], 360))
-    return [inside, outside, far, ranged, poles, edges]
+    # 64 steps put tiles of 90 degrees over a height field: some of them take more nodes
+    # than their rays would and go ray by ray, the others stay bundles
+    x = np.linspace(0.0, 10.0, 120)
+    xx, yy = np.meshgrid(x, x, indexing="xy")
+    ground = pv.StructuredGrid(xx, yy, 0.6 * np.sin(1.3 * xx) * np.cos(0.9 * yy) + 0.05 * xx)
+    coarse = ("coarse steps", ground.extract_surface().triangulate(), vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 16), 64))
+    return [inside, outside, far, ranged, poles, edges, coarse]
 
 
 @pytest.mark.parametrize("case", _sweep_cases(), ids=lambda case: case[0])
