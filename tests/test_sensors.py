@@ -213,7 +213,11 @@ def _sweep_cases():
     x = np.linspace(0.0, 10.0, 120)
     xx, yy = np.meshgrid(x, x, indexing="xy")
     ground = pv.StructuredGrid(xx, yy, 0.6 * np.sin(1.3 * xx) * np.cos(0.9 * yy) + 0.05 * xx)
-    coarse = ("coarse steps", ground.extract_surface().triangulate(), vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 16), 64))
+    coarse = (
+        "coarse steps",
+        ground.extract_surface().triangulate(),
+        vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 16), 64),
+    )
     return [inside, outside, far, ranged, poles, edges, coarse]
 
 
