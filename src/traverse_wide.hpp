@@ -192,9 +192,9 @@ class WideSearch {
     static_assert(kPolicy != HitPolicy::all || kFiltered, "every hit is found with the watertight kernel");
     struct NoFilter {};
     using Filter = std::conditional_t<kFiltered, TriangleFilter, NoFilter>;
-    /// The kernel and filter of the ray, made at its first leaf: most of a random ray's
-    /// searches end without one, and making them (the shear's three divisions) cost such
-    /// rays as much as their node tests.
+    /// The kernel and filter of the ray, made at its first leaf: a ray that passes the
+    /// scene by meets none, and making them (the shear's three divisions) cost such a ray
+    /// as much as its node tests.
     struct LeafTests {
         LeafTests(const Ray& ray, const CastContext& context) : kernel(ray, context), filter(filter_for(ray, kernel)) {}
         static Filter filter_for(const Ray& ray, const Kernel<Real>& kernel) {
