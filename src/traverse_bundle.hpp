@@ -122,13 +122,9 @@ class BundleTracer {
             for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], hit_[j]);
             return;
         }
-        if (!enclose()) {  // a bundle too wide to project, or incoherent: ray by ray
-            for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], trace_ray<KernelT, Real>(scene_, ray_[j], context_));
-            return;
-        }
-        for (int j = 0; j < n_; ++j) kernel_[j].reset(), filter_[j].reset();
-        std::fill_n(changed_, n_, false);
-        if (!traverse()) {  // a bundle costlier than its rays (see traverse): ray by ray after all
+        // A bundle too wide to project, incoherent, or costlier than its rays (see
+        // traverse): ray by ray.
+        if (!enclose() || !traverse()) {
             for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], trace_ray<KernelT, Real>(scene_, ray_[j], context_));
             return;
         }
@@ -294,6 +290,8 @@ class BundleTracer {
     /// enters, and ray by ray costs less than such a bundle.
     static constexpr int kVisitsPerRay = 4;
     bool traverse() {
+        for (int j = 0; j < n_; ++j) kernel_[j].reset(), filter_[j].reset();
+        std::fill_n(changed_, n_, false);
         int visits = 0;
         struct Pending {
             uint32_t child, count;
