@@ -195,6 +195,10 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         }
     };
     if (poll && !poll(0, n_tiles)) return false;  // so even a cast too short for a second call can be stopped
+    if (n_tiles <= 1) {  // (a thread started and joined would cost more than a small batch's rays)
+        work(0);
+        return true;
+    }
     std::vector<std::thread> workers;
     for (unsigned w = 0; w < n_workers; ++w) workers.emplace_back(work, w);
     {

@@ -66,6 +66,32 @@ def test_every_mesh_array_matches_numpy_reference(precision, parallel):
             assert_same(np.asarray(image[name]), expected[name], name)
 
 
+def test_arrays_follow_changes_to_the_mesh_between_casts():
+    # The scene keeps its lookup of the mesh's arrays from cast to cast: an array added,
+    # replaced, edited in place or removed between two casts must show in the next one.
+    mesh = bumpy_sphere(3)
+    scene = vrc.Scene(mesh)
+    cam = view()
+    assert "added" not in scene.cast(cam).point_data
+    rng = np.random.default_rng(3)
+
+    def check(image, name):
+        ids, bary = np.asarray(image["TriangleId"]), np.asarray(image["Barycentric"])
+        assert_same(np.asarray(image[name]), reference_arrays(scene.prepared, [name], ids, bary)[name], name)
+
+    mesh.point_data["added"] = rng.uniform(-1, 1, mesh.n_points)
+    check(scene.cast(cam), "added")
+    mesh.point_data["added"] = rng.integers(0, 9, (mesh.n_points, 3)).astype(np.int16)  # replaced: new type and shape
+    check(scene.cast(cam), "added")
+    mesh.point_data["added"][:] *= 2  # edited in place (no Modified(): the kept view sees it)
+    check(scene.cast(cam), "added")
+    mesh.cell_data["cells"] = rng.uniform(-1, 1, mesh.n_cells)
+    check(scene.cast(cam), "cells")
+    mesh.point_data.remove("added")
+    image = scene.cast(cam)
+    assert "added" not in image.point_data and "cells" in image.point_data
+
+
 @pytest.mark.parametrize("surface", ["triangles", "quads and a triangle strip"])
 def test_cell_ids_and_cell_arrays_with_and_without_a_cell_per_triangle(surface):
     # An all-triangle mesh's CellId is its TriangleId, written without the cell map (the

@@ -69,13 +69,23 @@ class MeshArrays(NamedTuple):
 
 def mesh_arrays(mesh: PreparedMesh) -> MeshArrays:
     """Numeric point and cell arrays of the mesh (names of geometry arrays and VTK's ghost
-    flags excluded): VTK's integer and floating types, any number of components."""
+    flags excluded): VTK's integer and floating types, any number of components.
+
+    Kept on the mesh until its surface changes (its modification time, which an added,
+    removed or modified array advances): looking them up in VTK took longer than a small
+    batch of rays."""
+    stamp = mesh.surface.GetMTime()
+    kept = mesh.__dict__.get("_arrays")
+    if kept is not None and kept[0] == stamp:
+        return kept[1]
     point, cell = numeric_arrays(mesh.surface)
     excluded = (*GEOMETRY_ARRAYS, "vtkGhostType")
-    return MeshArrays(
+    found = MeshArrays(
         *({n: v for n, v in found.items() if n not in excluded} for found in (point, cell)),
         composite=mesh.composite_ids is not None,
     )
+    object.__setattr__(mesh, "_arrays", (stamp, found))  # (not a field of the frozen dataclass)
+    return found
 
 
 def select_arrays(found: MeshArrays, arrays: Iterable[str] | str | None, interpolate: bool) -> list[str]:

@@ -120,7 +120,7 @@ def shift_lengths(values: np.ndarray, shift: int | np.ndarray, what: str, *, dis
     """Multiplies ``values`` by 2**-shift in place (exact), raising where a hit's value
     would leave the range of its type: an inf, or for a distance (t, Depth) a 0 or a
     subnormal that lost digits (a coordinate near 0 may be as small as it likes)."""
-    if np.all(shift == 0):
+    if shift == 0 if isinstance(shift, int) else np.all(shift == 0):
         return
     hit = np.isfinite(values) & (values != 0)
     with np.errstate(over="ignore", under="ignore"):

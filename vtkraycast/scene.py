@@ -94,16 +94,23 @@ def _ray_batch(origins: Any, directions: Any, threads: int) -> tuple[np.ndarray,
         a = np.asarray(value)
         if a.ndim == 0 or a.shape[-1] != 3:
             raise ValueError(f"{name} must have shape (..., 3), got {a.shape}")
-        if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        if a.dtype.kind not in "fiu":
             raise TypeError(f"{name} must be numeric, got dtype {a.dtype}")
         arrays.append(a)
     try:
-        shape = np.broadcast_shapes(arrays[0].shape[:-1], arrays[1].shape[:-1])
+        shape = arrays[0].shape[:-1]
+        if arrays[1].shape[:-1] != shape:
+            shape = np.broadcast_shapes(shape, arrays[1].shape[:-1])
     except ValueError:
         raise ValueError(
             f"origins {arrays[0].shape} and directions {arrays[1].shape} do not broadcast against each other"
         ) from None
-    o, d = (np.ascontiguousarray(np.broadcast_to(a, (*shape, 3)).reshape(-1, 3), dtype=np.float64) for a in arrays)
+    o, d = (
+        np.ascontiguousarray(
+            (a if a.shape[:-1] == shape else np.broadcast_to(a, (*shape, 3))).reshape(-1, 3), dtype=np.float64
+        )
+        for a in arrays
+    )
     finite, nonzero, *extent = _core.ray_extent(o, d, threads)
     if not finite:
         for a, name in ((o, "origins"), (d, "directions")):
@@ -124,8 +131,10 @@ class Scene:
         Polygons and strips are triangulated (each triangle remembers its input cell);
         vertex and line cells are ignored; other datasets contribute their surface; the
         leaves of a composite dataset (pyvista.MultiBlock, vtkMultiBlockDataSet,
-        vtkPartitionedDataSet) make one scene. The mesh is copied: later changes to it do
-        not affect the scene.
+        vtkPartitionedDataSet) make one scene. Its points and cells are copied: later
+        changes to them do not affect the scene. A vtkPolyData's point and cell arrays
+        are read at each cast (arrays added, edited or removed since show in the next);
+        other inputs' arrays are copied with their surface.
     threads : int, optional
         Threads for the build; all cores by default.
     bvh : bool, default: True
@@ -931,9 +940,11 @@ class Scene:
         j = direction_shifts(d, bounded=(tmin, tmax) != (0.0, math.inf), extent=(d_min, d_max))
         request = self._request(strategy, precision, accel, threads, backface_culling)
         request.origins = np.ldexp(o, k) if k else o
-        request.directions = np.ldexp(d, np.reshape(j, (-1, 1))) if np.any(j) else d
+        request.directions = (
+            np.ldexp(d, np.reshape(j, (-1, 1))) if (np.any(j) if isinstance(j, np.ndarray) else j) else d
+        )
         request.sweep_rows = sweep_rows
-        if np.ndim(j) == 0:  # (else the bounds are 0 and inf, the same in any unit)
+        if not isinstance(j, np.ndarray):  # (else the bounds are 0 and inf, the same in any unit)
             request.tmin, request.tmax = _shifted(tmin, k - j), _shifted(tmax, k - j)
         return request, shape, (k, j)
 
