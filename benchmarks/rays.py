@@ -99,6 +99,7 @@ def main() -> None:
             print(rows[-1], flush=True)
         if label.startswith("bumpy"):
             others = single_thread_peers(scene, *ray_sets(scene, args.sample, rng)["from outside"][:2])
+            small = small_batches(scene, peer, rng)
     lines = [
         f"`python benchmarks/rays.py --rays {args.rays} --pairs {args.pairs}` on {machine}. "
         f"{args.rays:,} rays per set; Open3D's time over vtkraycast's, median of {args.pairs} calls timed in "
@@ -125,9 +126,35 @@ def main() -> None:
         "| caster | threads | Mrays/s | ids agree with vtkraycast |",
         "|---|---:|---:|---:|",
     ] + [f"| {name} | {threads} | {rate:.2f} | {agree:.3%} |" for name, threads, rate, agree in others]
+    lines += [
+        "",
+        "Small batches, bumpy sphere, rays from outside: the time of one call (median of "
+        f"{SMALL_PAIRS} alternated pairs; Open3D's excludes turning numpy arrays into its tensors, as above):",
+        "",
+        "| rays per call | vtkraycast intersect µs | Open3D cast_rays µs | Open3D's time over vtkraycast's |",
+        "|---:|---:|---:|---:|",
+    ] + [f"| {n:,} | {ours:.0f} | {theirs:.0f} | {ratio[0]:.2f}x ({ratio[1]:.2f} to {ratio[2]:.2f}) |"
+         for n, ours, theirs, ratio in small]  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "rays.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+
+
+SMALL_PAIRS = 101
+
+
+def small_batches(scene: vrc.Scene, peer: Open3DPeer, rng: np.random.Generator) -> list[tuple]:
+    """(rays, our µs, Open3D's µs, alternated ratio) per call of 1 to 10,000 rays: what a
+    user pays per call (picking, a few points' visibility) besides the rays themselves."""
+    rows = []
+    for n in (1, 100, 10_000):
+        origins, directions, _ = ray_sets(scene, n, rng)["from outside"]
+        rays = peer.prepare(origins, directions)
+        ours, theirs = partial(scene.intersect, origins, directions), partial(peer.run, rays)
+        ratio = alternated_ratio(ours, theirs, SMALL_PAIRS)
+        rows.append((n, median_seconds(ours, SMALL_PAIRS) * 1e6, median_seconds(theirs, SMALL_PAIRS) * 1e6, ratio))
+        print(rows[-1], flush=True)
+    return rows
 
 
 def single_thread_peers(scene: vrc.Scene, origins: np.ndarray, directions: np.ndarray) -> list[tuple]:
