@@ -218,7 +218,17 @@ def _sweep_cases():
         ground.extract_surface().triangulate(),
         vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 16), 64),
     )
-    return [inside, outside, far, ranged, poles, edges, coarse]
+    # over a finer height field, the rows of tiles whose beams graze it: a cut bundle sends
+    # the next tiles of its row ray by ray, later ones try bundles again on a smaller budget
+    x = np.linspace(0.0, 10.0, 400)
+    xx, yy = np.meshgrid(x, x, indexing="xy")
+    fine = pv.StructuredGrid(xx, yy, 0.6 * np.sin(1.3 * xx) * np.cos(0.9 * yy) + 0.05 * xx)
+    grazing = (
+        "grazing rows",
+        fine.extract_surface().triangulate(),
+        vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 32), 256),
+    )
+    return [inside, outside, far, ranged, poles, edges, coarse, grazing]
 
 
 @pytest.mark.parametrize("case", _sweep_cases(), ids=lambda case: case[0])
