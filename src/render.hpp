@@ -124,32 +124,44 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         }
     };
     const bool interleave = !kBruteForce && scene.ray_bytes() >= kInterleavedBytes;
-    auto trace_rays = [&](std::size_t tile) {
+    // `by_ray` (a worker's): whether a tile of coherent rays goes one ray after another or
+    // several in flight (incoherent ones always go several in flight).
+    auto trace_rays = [&](std::size_t tile, CostChooser& by_ray) {
         // The seed's bounding test, a whole tile at a time: tiles that cannot see the
         // scene are misses without a single ray made.
         const bool may_hit = rays.tile_may_hit(tile);
         std::vector<std::size_t> tile_rays;
         if (may_hit && interleave) rays.for_each_in_tile(tile, [&](std::size_t k) { tile_rays.push_back(k); });
-        if (may_hit && interleave && !coherent(scene, rays, tile_rays)) {
+        unsigned nodes = 0;  // (the chooser's unit of work: rays' costs vary far more)
+        const auto interleaved = [&] {
             const auto take = [&](std::size_t k, const Ray& ray, const Hit<Real>& hit, NoSink*) { store(k, ray, hit); };
+            NoSink* no_sinks = nullptr;
             if (context.any_hit)
-                trace_rays_interleaved<Kernel, Real, HitPolicy::any>(scene, rays, tile_rays, context, take);
+                trace_rays_interleaved<Kernel, Real, HitPolicy::any>(scene, rays, tile_rays, context, take, no_sinks, &nodes);
             else
-                trace_rays_interleaved<Kernel, Real, HitPolicy::closest>(scene, rays, tile_rays, context, take);
-            return;
-        }
-        rays.for_each_in_tile(tile, [&](std::size_t k) {
-            if (!may_hit) return store(k, Ray{}, Hit<Real>{});  // (store reads the ray of hits only)
-            const Ray ray = rays.ray(k);
-            constexpr HitPolicy kAny = HitPolicy::any;
-            if (context.any_hit)
-                store(k, ray,
-                      kBruteForce ? brute_force_hit<Kernel, Real, kAny>(scene, ray, context)
-                                  : trace_ray<Kernel, Real, kAny>(scene, ray, context));
-            else
-                store(k, ray,
-                      kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, context)
-                                  : trace_ray<Kernel, Real>(scene, ray, context));
+                trace_rays_interleaved<Kernel, Real, HitPolicy::closest>(scene, rays, tile_rays, context, take, no_sinks, &nodes);
+        };
+        if (may_hit && interleave && !coherent(scene, rays, tile_rays)) return interleaved();
+        const auto one_by_one = [&] {
+            rays.for_each_in_tile(tile, [&](std::size_t k) {
+                if (!may_hit) return store(k, Ray{}, Hit<Real>{});  // (store reads the ray of hits only)
+                const Ray ray = rays.ray(k);
+                unsigned* counted = interleave ? &nodes : nullptr;
+                constexpr HitPolicy kAny = HitPolicy::any;
+                if (context.any_hit)
+                    store(k, ray,
+                          kBruteForce ? brute_force_hit<Kernel, Real, kAny>(scene, ray, context)
+                                      : trace_ray<Kernel, Real, kAny>(scene, ray, context, NoSink{}, counted));
+                else
+                    store(k, ray,
+                          kBruteForce ? brute_force_hit<Kernel, Real>(scene, ray, context)
+                                      : trace_ray<Kernel, Real>(scene, ray, context, NoSink{}, counted));
+            });
+        };
+        if (!may_hit || !interleave) return one_by_one();
+        by_ray.run([&](bool several) {
+            several ? interleaved() : one_by_one();
+            return double(nodes);
         });
     };
     // Camera rays go a tile at a time (traverse_tile.hpp), through the BVH or, on a flat
@@ -189,8 +201,9 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
                 return;
             }
         }
+        CostChooser by_ray;
         for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
-            trace_rays(tile);
+            trace_rays(tile, by_ray);
             tile_done();
         }
     };

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "camera_rays.hpp"
+#include "cost_chooser.hpp"
 #include "kernel_watertight.hpp"
 #include "traverse.hpp"
 #include "triangle_filter.hpp"
@@ -136,10 +137,24 @@ class BundleTracer {
             cut = !traverse(history.visit_budget() * n_);
             if (!cut) return store_bundle(store);
         }
-        unsigned steps = 0;
-        for (int j = 0; j < n_; ++j)
-            store(index_[j], ray_[j], trace_ray<KernelT, Real>(scene_, ray_[j], context_, NoSink{}, &steps));
-        history.steps_per_ray = double(steps) / n_;
+        unsigned nodes = 0;
+        const auto by_ray = [&](bool interleaved) {
+            if (!interleaved) {
+                for (int j = 0; j < n_; ++j)
+                    store(index_[j], ray_[j], trace_ray<KernelT, Real>(scene_, ray_[j], context_, NoSink{}, &nodes));
+            } else {
+                which_.assign(index_, index_ + n_);
+                const auto take = [&](std::size_t k, const Ray& ray, const Hit<Real>& hit, NoSink*) { store(k, ray, hit); };
+                trace_rays_interleaved<KernelT, Real, HitPolicy::closest>(scene_, rays_, which_, context_, take,
+                                                                          static_cast<NoSink*>(nullptr), &nodes);
+            }
+            return double(nodes);
+        };
+        if (scene_.ray_bytes() >= kInterleavedBytes)
+            history.by_ray.run(by_ray);
+        else
+            by_ray(false);
+        history.steps_per_ray = double(nodes) / n_;
         if (cut) history.single_tiles = RowHistory::kSingleAfterCut;
     }
 
@@ -158,6 +173,7 @@ class BundleTracer {
         static constexpr int kSingleAfterCut = 3;
         double steps_per_ray = -1;  // of the row's last tile traced ray by ray (-1: none yet)
         int single_tiles = 0;       // tiles of the row still to go ray by ray
+        CostChooser by_ray;         // rays one after another, or several in flight (a large scene's)
         [[nodiscard]] double visit_budget() const {
             return steps_per_ray < 0 ? kVisitsPerRay : std::clamp(steps_per_ray / kStepsPerVisit, 0.25, double(kVisitsPerRay));
         }
@@ -531,6 +547,7 @@ class BundleTracer {
     Hit<Real> hit_[kMaxRays];
     double bound_[kMaxRays], w_[kMaxRays], a_[kMaxRays], b_[kMaxRays];
     std::vector<RowHistory> history_;  ///< by row of tiles
+    std::vector<std::size_t> which_;   ///< a tile's rays, for trace_rays_interleaved
 };
 
 }  // namespace vrc

@@ -228,6 +228,7 @@ class WideSearch {
             }
         }
         const WideNode& node = scene_.wide[node_];
+        ++nodes_;
         alignas(32) float enter[WideNode::kWidth];
         unsigned mask = lanes_.test(node, enter);
         // Push the entered lanes farthest first (an insertion sort: most nodes have few
@@ -252,6 +253,8 @@ class WideSearch {
     }
 
     [[nodiscard]] const Hit<Real>& hit() const { return hit_; }
+    /// Nodes tested so far: what the search cost.
+    [[nodiscard]] unsigned nodes() const { return nodes_; }
 
    private:
     /// Pops the next node the ray may meet before the closest hit so far; the leaves popped
@@ -327,33 +330,35 @@ class WideSearch {
     uint32_t node_ = 0;  // the next node to test: the root first
     Pending leaf_{};     // the next leaf to test, when leaf_stage_ is not 0
     int leaf_stage_ = 0;
+    unsigned nodes_ = 0;
     std::size_t top_ = 0;  // (not int: the stack's uint32_t stores could alias it)
     Pending stack_[WideNode::kWidth * 128];  // (at most seven pushed per level, under 96 levels)
 };
 
 /// The traversal for one ray: float lanes when its numbers allow, double lanes otherwise.
 /// With HitPolicy::all, `sink(i, t, b)` receives every hit (triangle i in leaf order) and
-/// the returned hit is empty. (Every hit needs the filtered watertight kernel.) `steps`,
-/// when given, is advanced by the search's steps (nodes tested): what the ray cost.
+/// the returned hit is empty. (Every hit needs the filtered watertight kernel.) `nodes`,
+/// when given, is advanced by the nodes the search tested: what the ray cost.
 template <template <class> class Kernel, class Real, HitPolicy kPolicy = HitPolicy::closest, class Sink = NoSink>
 Hit<Real> trace_ray(const Scene& scene, const Ray& ray, const CastContext& context, Sink&& sink = Sink{},
-                    unsigned* steps = nullptr) {
+                    unsigned* nodes = nullptr) {
     using S = std::remove_reference_t<Sink>;
     if (scene.wide.empty()) return Hit<Real>{};
-    unsigned n = 1;
     // (the two searches spelt out: folded into one generic lambda, small scenes' rays took
     // about 5 % longer)
     FloatLanes fast;
     if (fast.setup(ray, scene.anchor)) {
         WideSearch<Kernel, Real, kPolicy, FloatLanes, false, S> search(scene, ray, context, fast, &sink);
-        while (search.step()) ++n;
-        if (steps) *steps += n;
+        while (search.step()) {
+        }
+        if (nodes) *nodes += search.nodes();
         return search.hit();
     }
     WideSearch<Kernel, Real, kPolicy, DoubleLanes, false, S> search(scene, ray, context, DoubleLanes(ray, scene.anchor),
                                                                       &sink);
-    while (search.step()) ++n;
-    if (steps) *steps += n;
+    while (search.step()) {
+    }
+    if (nodes) *nodes += search.nodes();
     return search.hit();
 }
 
@@ -397,11 +402,11 @@ bool coherent(const Scene& scene, const Rays& rays, const std::vector<std::size_
 /// time waiting. The answers are trace_ray's; rays finish in any order. With HitPolicy::all
 /// each search in flight has a sink of its own among `sinks` (kInFlight of them), readied
 /// for ray k by `sink.start(k, ray)`; `store` then receives it too: `store(k, ray, hit,
-/// sink)` (nullptr without sinks).
+/// sink)` (nullptr without sinks). `nodes` as trace_ray's.
 constexpr int kInFlight = 8;
 template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Rays, class Store, class Sink = NoSink>
 void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vector<std::size_t>& which,
-                            const CastContext& context, Store&& store, Sink* sinks = nullptr) {
+                            const CastContext& context, Store&& store, Sink* sinks = nullptr, unsigned* nodes = nullptr) {
     using Search = WideSearch<Kernel, Real, kPolicy, FloatLanes, true, Sink>;
     struct Slot {
         std::size_t k;
@@ -424,9 +429,9 @@ void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vec
             FloatLanes fast;
             if (scene.wide.empty() || !fast.setup(slot.ray, scene.anchor)) {
                 if constexpr (kPolicy == HitPolicy::all)
-                    store(k, slot.ray, trace_ray<Kernel, Real, kPolicy>(scene, slot.ray, context, *sink), sink);
+                    store(k, slot.ray, trace_ray<Kernel, Real, kPolicy>(scene, slot.ray, context, *sink, nodes), sink);
                 else
-                    store(k, slot.ray, trace_ray<Kernel, Real, kPolicy>(scene, slot.ray, context), sink);
+                    store(k, slot.ray, trace_ray<Kernel, Real, kPolicy>(scene, slot.ray, context, NoSink{}, nodes), sink);
                 continue;
             }
             slot.k = k;
@@ -441,6 +446,7 @@ void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vec
         for (int i = 0; i < kInFlight; ++i) {
             Slot& slot = slots[i];
             if (!slot.search || slot.search->step()) continue;
+            if (nodes) *nodes += slot.search->nodes();
             store(slot.k, slot.ray, slot.search->hit(), sinks ? &sinks[i] : nullptr);
             slot.search.reset();
             if (!refill(i)) --active;
