@@ -158,6 +158,32 @@ def test_lidar_range_limits():
         vrc.Lidar(position, [0.0], 0)
 
 
+def test_scans_keep_their_own_arrays_and_the_lidar_its_own():
+    # Inside a closed box every beam returns, and the cloud then holds the arrays the core
+    # wrote: later scans must write elsewhere, the range image must not share them, and
+    # the lidar keeps copies of what it was made with.
+    elevations, position = np.array([-30.0, 0.0, 12.0]), np.array([0.3, -0.4, 0.7])
+    scene, lidar = _box(), vrc.Lidar(position, elevations, 360)
+    first, image = scene.scan(lidar, range_image=True)
+    assert first.n_points == 3 * 360
+    points, arrays = np.array(first.points), {name: np.array(first[name]) for name in first.point_data}
+    image[:] = -1.0
+    elevations[:] = 5.0
+    position[:] = 0.0
+    for moved in ((-0.5, 0.2, 0.1), (0.1, 0.1, -0.6)):
+        scene.scan(vrc.Lidar(moved, [-30.0, 0.0, 12.0], 360))
+        np.testing.assert_array_equal(first.points, points)
+        for name, values in arrays.items():
+            np.testing.assert_array_equal(first[name], values, err_msg=name)
+    again = scene.scan(lidar)
+    np.testing.assert_array_equal(again.points, points)
+    np.testing.assert_array_equal(again["Elevation"], arrays["Elevation"])
+    _, directions, ring, azimuth = lidar.rays()
+    for kept in (directions, ring, azimuth, lidar.elevations, lidar.position):
+        with pytest.raises(ValueError, match="read-only"):
+            kept[0] = 0
+
+
 def test_panorama_depth_is_the_distance_to_the_walls():
     eye = np.array([1.2, 0.1, 0.4])
     panorama = vrc.Panorama(eye, 96, 48, forward=(0, 1, 0))

@@ -399,18 +399,26 @@ class Scene:
             {"threads": threads},
             sweep_rows=len(lidar.elevations),
         )
-        ranges = buffers["Depth"].astype(np.float64)
-        beams = np.flatnonzero(np.isfinite(ranges))  # (take by index: a boolean mask on (n, 3) is 5x slower)
-        cloud = pv.PolyData(buffers["Position"].take(beams, axis=0))
-        cloud.point_data["Range"] = ranges.take(beams)
-        cloud.point_data["Elevation"] = lidar.elevations.take(ring.take(beams))
-        cloud.point_data["Azimuth"] = azimuth.take(beams)
-        cloud.point_data["Ring"] = ring.take(beams).astype(np.int32)
+        ranges = buffers["Depth"].astype(np.float64, copy=False)
+        returned = np.isfinite(ranges)
+        every = bool(returned.all())
+        beams = slice(None) if every else np.flatnonzero(returned)
+
+        def pick(values: np.ndarray) -> np.ndarray:
+            # every beam returned: the arrays the core wrote, as cast() hands them out; else
+            # the returns' rows (taken by index: a boolean mask on (n, 3) is 5x slower)
+            return values if every else values.take(beams, axis=0)
+
+        cloud = pv.PolyData(pick(buffers["Position"]))
+        cloud.point_data["Range"] = pick(ranges)
+        cloud.point_data["Elevation"] = lidar.elevations[ring[beams]]
+        cloud.point_data["Azimuth"] = azimuth[beams].copy()
+        cloud.point_data["Ring"] = ring[beams].astype(np.int32)
         for name in names:
             if name not in ("Depth", "Position", "vtkValidPointMask"):
-                cloud.point_data[name] = buffers[name].take(beams, axis=0)
+                cloud.point_data[name] = pick(buffers[name])
         if range_image:
-            return cloud, ranges.reshape(len(lidar.elevations), lidar.azimuth_steps)
+            return cloud, ranges.reshape(len(lidar.elevations), lidar.azimuth_steps).copy()
         return cloud
 
     def visible_cells(self, camera: Camera | Any, *, threads: int | None = None) -> np.ndarray:

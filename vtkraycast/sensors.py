@@ -39,10 +39,17 @@ def _directions(f, left, up, azimuths: np.ndarray, elevations: np.ndarray) -> np
 
 
 def _point(value: Any, name: str) -> np.ndarray:
-    p = np.asarray(value, dtype=np.float64).reshape(-1)
+    p = _frozen(value)
     if p.shape != (3,) or not np.isfinite(p).all():
         raise ValueError(f"{name} must be three finite numbers, got {value!r}")
     return p
+
+
+def _frozen(value: Any) -> np.ndarray:
+    """A read-only float64 copy, flat: a sensor keeps what it was made with."""
+    a = np.array(value, dtype=np.float64).reshape(-1)
+    a.flags.writeable = False
+    return a
 
 
 @dataclass(frozen=True)
@@ -117,7 +124,7 @@ class Lidar:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "position", _point(self.position, "position"))
-        elevations = np.asarray(self.elevations, dtype=np.float64).reshape(-1)
+        elevations = _frozen(self.elevations)
         if elevations.size == 0 or not np.isfinite(elevations).all() or (np.abs(elevations) > 90).any():
             raise ValueError("elevations must be one or more angles in degrees within [-90, 90]")
         object.__setattr__(self, "elevations", elevations)
@@ -130,9 +137,16 @@ class Lidar:
 
     def rays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Origins, unit directions ``(rings * steps, 3)`` (beam ``a`` of ring ``e`` at
-        ``a + e * steps``), and each beam's ring and azimuth (degrees)."""
-        azimuths = np.arange(self.azimuth_steps) * (360.0 / self.azimuth_steps)
-        directions = _directions(*self._axes, np.radians(azimuths), np.radians(self.elevations))
-        ring = np.repeat(np.arange(len(self.elevations)), self.azimuth_steps)
-        azimuth = np.tile(azimuths, len(self.elevations))
-        return np.broadcast_to(self.position, directions.shape), directions, ring, azimuth
+        ``a + e * steps``), and each beam's ring and azimuth (degrees). Read-only arrays,
+        made at the first call and kept: every scan of the lidar casts the same beams."""
+        kept = self.__dict__.get("_rays")
+        if kept is None:
+            azimuths = np.arange(self.azimuth_steps) * (360.0 / self.azimuth_steps)
+            directions = _directions(*self._axes, np.radians(azimuths), np.radians(self.elevations))
+            ring = np.repeat(np.arange(len(self.elevations)), self.azimuth_steps)
+            azimuth = np.tile(azimuths, len(self.elevations))
+            for a in (directions, ring, azimuth):
+                a.flags.writeable = False
+            kept = (np.broadcast_to(self.position, directions.shape), directions, ring, azimuth)
+            object.__setattr__(self, "_rays", kept)  # (not a field of the frozen dataclass)
+        return kept
