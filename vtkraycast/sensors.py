@@ -88,11 +88,17 @@ class Panorama:
         object.__setattr__(self, "_axes", _frame(self.forward, self.up))
 
     def rays(self) -> tuple[np.ndarray, np.ndarray]:
-        """Origins and unit directions ``(nx * ny, 3)``, pixel ``(i, r)`` at ``i + r * nx``."""
-        azimuths = 2 * np.pi * (np.arange(self.nx) + 0.5) / self.nx - np.pi
-        elevations = np.pi * (np.arange(self.ny) + 0.5) / self.ny - np.pi / 2
-        directions = _directions(*self._axes, azimuths, elevations)
-        return np.broadcast_to(self.eye, directions.shape), directions
+        """Origins and unit directions ``(nx * ny, 3)``, pixel ``(i, r)`` at ``i + r * nx``.
+        Read-only arrays, made at the first call and kept."""
+        kept = self.__dict__.get("_rays")
+        if kept is None:
+            azimuths = 2 * np.pi * (np.arange(self.nx) + 0.5) / self.nx - np.pi
+            elevations = np.pi * (np.arange(self.ny) + 0.5) / self.ny - np.pi / 2
+            directions = _directions(*self._axes, azimuths, elevations)
+            directions.flags.writeable = False
+            kept = (np.broadcast_to(self.eye, directions.shape), directions)
+            object.__setattr__(self, "_rays", kept)  # (not a field of the frozen dataclass)
+        return kept
 
 
 @dataclass(frozen=True)
