@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <numeric>
 #include <optional>
 #include <vector>
 
@@ -135,17 +136,17 @@ class BundleTracer {
             --history.single_tiles;
         } else if (enclose()) {
             cut = !traverse(history.visit_budget() * n_);
-            if (!cut) return store_bundle(store);
+            if (!cut) return store_tile(store);
         }
         unsigned nodes = 0;
         const auto by_ray = [&](bool interleaved) {
             if (!interleaved) {
-                for (int j = 0; j < n_; ++j)
-                    store(index_[j], ray_[j], trace_ray<KernelT, Real>(scene_, ray_[j], context_, NoSink{}, &nodes));
+                for (int j = 0; j < n_; ++j) hit_[j] = trace_ray<KernelT, Real>(scene_, ray_[j], context_, NoSink{}, &nodes);
             } else {
-                which_.assign(index_, index_ + n_);
-                const auto take = [&](std::size_t k, const Ray& ray, const Hit<Real>& hit, NoSink*) { store(k, ray, hit); };
-                trace_rays_interleaved<KernelT, Real, HitPolicy::closest>(scene_, rays_, which_, context_, take,
+                which_.resize(std::size_t(n_));
+                std::iota(which_.begin(), which_.end(), std::size_t(0));
+                const auto take = [&](std::size_t j, const Ray&, const Hit<Real>& hit, NoSink*) { hit_[j] = hit; };
+                trace_rays_interleaved<KernelT, Real, HitPolicy::closest>(scene_, TileRays{ray_}, which_, context_, take,
                                                                           static_cast<NoSink*>(nullptr), &nodes);
             }
             return double(nodes);
@@ -156,6 +157,7 @@ class BundleTracer {
             by_ray(false);
         history.steps_per_ray = double(nodes) / n_;
         if (cut) history.single_tiles = RowHistory::kSingleAfterCut;
+        store_tile(store);
     }
 
    private:
@@ -179,8 +181,21 @@ class BundleTracer {
         }
     };
 
+    /// The tile's rays by their place in it, as trace_rays_interleaved asks for them.
+    struct TileRays {
+        const Ray* rays;
+        [[nodiscard]] Ray ray(std::size_t j) const { return rays[j]; }
+    };
+
+    /// Stores the tile's hits and misses. The rows of the mesh's point arrays the hits
+    /// interpolate lie scattered in the mesh's point order: they are asked for all at once
+    /// first, so that their loads overlap (stored one by one, each hit waited on its own).
     template <class Store>
-    void store_bundle(const Store& store) {
+    void store_tile(const Store& store) {
+        int n_hits = 0;
+        for (int j = 0; j < n_; ++j)
+            if (hit_[j].found()) store.prefetch(hit_prims_[n_hits++] = hit_[j].prim);
+        store.prefetch_rows(hit_prims_, std::size_t(n_hits));
         for (int r = 0; r < rows_; ++r) {  // hits one by one, runs of misses at once
             for (int j = r * cols_, end = (r + 1) * cols_; j < end;) {
                 if (hit_[j].found()) {
@@ -548,6 +563,7 @@ class BundleTracer {
     double bound_[kMaxRays], w_[kMaxRays], a_[kMaxRays], b_[kMaxRays];
     std::vector<RowHistory> history_;  ///< by row of tiles
     std::vector<std::size_t> which_;   ///< a tile's rays, for trace_rays_interleaved
+    uint32_t hit_prims_[kMaxRays];     ///< the triangles a tile's rays hit
 };
 
 }  // namespace vrc
