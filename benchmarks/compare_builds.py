@@ -7,7 +7,7 @@ ratios where separate runs minutes apart cannot resolve it.
     (change the core)
     pip install --no-build-isolation --no-deps . --target /tmp/after -Cbuild-dir=/tmp/build-after
     python benchmarks/compare_builds.py /tmp/before /tmp/after [--rounds 60] [--threads 2]
-        [--scene frog|channels|terrain|bumpy|small|sphere|ant] [--view framed|close|full|lidar|rays|crossings]
+        [--scene frog|channels|terrain|bumpy|small|sphere|ant] [--view framed|close|full|lidar|rays|occluded|crossings]
         [--flat] [--pixels 1024]
         [--arrays ids|geometry|default] [--cold]
 
@@ -23,10 +23,11 @@ round by round. The frog, channels and terrain scenes and their views are benchm
 default geometry (``geometry``: interpolate=False), the defaults with the mesh's arrays
 (``default``), or the arrays named (``Depth,Elevation``). Builds are compared by the first
 array cast. ``--view lidar`` times ``Scene.scan`` of benchmarks/sensors.py's 64 x 2048
-lidar instead, comparing range images; ``--view rays`` times ``Scene.intersect`` (its default
-arrays) of benchmarks/rays.py's rays from outside (500,000; ``--rays``), comparing triangle
-ids; ``--view crossings`` times ``Scene.intersect_all`` of visibility.py's random rays
-(origins in the mesh's box, random directions; ``--rays``), comparing the crossings' t.
+lidar instead, comparing range images; ``--view rays`` times ``Scene.intersect`` (its
+default arrays) of benchmarks/rays.py's rays from outside (500,000; ``--rays``), comparing
+triangle ids, ``--view occluded`` ``Scene.occluded`` of the same rays; ``--view crossings``
+times ``Scene.intersect_all`` of visibility.py's random rays (origins in the mesh's box,
+random directions; ``--rays``), comparing the crossings' t.
 The sphere scene is rays.py's 20 k-triangle bumpy sphere, the ant pyvista's.
 ``--cold`` writes over 64 MB before each cast, as another caster run in between would
 (peers.py's alternated pairs), so the cast finds its scene out of cache.
@@ -69,7 +70,7 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
     else:
         mesh = scenes.SCENES[args.scene]()
     scene = vrc.Scene(mesh, threads=args.threads, bvh=not args.flat)
-    if args.view == "rays":
+    if args.view in ("rays", "occluded"):
         import rays
 
         origins, directions, _ = rays.ray_sets(scene, args.rays, np.random.default_rng(7))["from outside"]
@@ -90,6 +91,8 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
     def cast() -> np.ndarray:
         if args.view == "rays":
             return scene.intersect(origins, directions, threads=args.threads)["triangle_id"]
+        if args.view == "occluded":
+            return scene.occluded(origins, directions, threads=args.threads)
         if args.view == "crossings":
             return scene.intersect_all(origins, directions, threads=args.threads)["t"]
         if args.view == "lidar":
@@ -115,8 +118,10 @@ def main() -> None:
     parser.add_argument(
         "--scene", choices=["frog", "channels", "terrain", "bumpy", "small", "sphere", "ant"], default="frog"
     )
-    parser.add_argument("--view", choices=["framed", "close", "full", "lidar", "rays", "crossings"], default="framed")
-    parser.add_argument("--rays", type=int, default=500_000, help="rays of --view rays and crossings")
+    parser.add_argument(
+        "--view", choices=["framed", "close", "full", "lidar", "rays", "occluded", "crossings"], default="framed"
+    )
+    parser.add_argument("--rays", type=int, default=500_000, help="rays of --view rays, occluded and crossings")
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")
     parser.add_argument("--pixels", type=int, default=1024)
     parser.add_argument(
