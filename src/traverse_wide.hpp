@@ -232,12 +232,14 @@ class WideSearch {
         alignas(32) float enter[WideNode::kWidth];
         unsigned mask = lanes_.test(node, enter);
         // Push the entered lanes farthest first (an insertion sort: most nodes have few
-        // entered lanes), so the nearest is popped first; every hit wanted, any order does.
+        // entered lanes), so the nearest is popped first. Every hit wanted, any order does;
+        // any hit, too: a search stops at the first found, wherever it lies, and unsorted
+        // lanes took 0.78x to 0.96x the time of sorted ones (rays.py's three ray sets).
         int order[WideNode::kWidth], n = 0;
         for (; mask; mask &= mask - 1) {
             const int c = __builtin_ctz(mask);
             int at = n++;
-            if constexpr (kPolicy != HitPolicy::all)
+            if constexpr (kPolicy == HitPolicy::closest)
                 for (; at > 0 && enter[order[at - 1]] < enter[c]; --at) order[at] = order[at - 1];
             order[at] = c;
         }
