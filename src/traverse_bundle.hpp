@@ -155,7 +155,7 @@ class BundleTracer {
             history.by_ray.run(by_ray);
         else
             by_ray(false);
-        history.steps_per_ray = double(nodes) / n_;
+        history.nodes_per_ray = double(nodes) / n_;
         if (cut) history.single_tiles = RowHistory::kSingleAfterCut;
         store_tile(store);
     }
@@ -163,21 +163,21 @@ class BundleTracer {
    private:
     /// What a worker has seen of a row of tiles: neighbouring tiles of a sweep cost alike
     /// (a lidar's rings meet a height field at the same range all around), so one cut
-    /// bundle sends the next tiles of its row ray by ray, and the steps their rays took
+    /// bundle sends the next tiles of its row ray by ray, and the nodes their rays tested
     /// bound what a later bundle of the row may spend. A bundle's visit of a node or leaf
-    /// costs about as much as ten steps of a single ray (1,100 cycles against 90 to 170,
-    /// rdtsc on the frog's and the terrain's scans): on the frog, whose rays take 20 to 30
-    /// steps, bundles of up to 2 visits per ray took 0.3x to 0.5x the time of their rays
-    /// traced one by one; on the terrain, whose rays take 2.5 to 11, bundles of more than
+    /// costs about as much as ten node tests of a single ray (1,100 cycles against 90 to
+    /// 170, rdtsc on the frog's and the terrain's scans): on the frog, whose rays test 20 to
+    /// 30 nodes, bundles of up to 2 visits per ray took 0.3x to 0.5x the time of their rays
+    /// traced one by one; on the terrain, whose rays test 2.5 to 11, bundles of more than
     /// 0.25 visits per ray took 1.3x to 2.7x.
     struct RowHistory {
-        static constexpr double kStepsPerVisit = 10;
+        static constexpr double kNodesPerVisit = 10;
         static constexpr int kSingleAfterCut = 3;
-        double steps_per_ray = -1;  // of the row's last tile traced ray by ray (-1: none yet)
+        double nodes_per_ray = -1;  // of the row's last tile traced ray by ray (-1: none yet)
         int single_tiles = 0;       // tiles of the row still to go ray by ray
         CostChooser by_ray;         // rays one after another, or several in flight (a large scene's)
         [[nodiscard]] double visit_budget() const {
-            return steps_per_ray < 0 ? kVisitsPerRay : std::clamp(steps_per_ray / kStepsPerVisit, 0.25, double(kVisitsPerRay));
+            return nodes_per_ray < 0 ? kVisitsPerRay : std::clamp(nodes_per_ray / kNodesPerVisit, 0.25, double(kVisitsPerRay));
         }
     };
 
