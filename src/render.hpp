@@ -142,11 +142,11 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
                 trace_rays_interleaved<Kernel, Real, HitPolicy::closest>(scene, rays, tile_rays, context, take, no_sinks, &nodes);
         };
         if (may_hit && interleave && !coherent(scene, rays, tile_rays)) return interleaved();
+        unsigned* counted = interleave ? &nodes : nullptr;  // (only the chooser reads them)
         const auto one_by_one = [&] {
             rays.for_each_in_tile(tile, [&](std::size_t k) {
                 if (!may_hit) return store(k, Ray{}, Hit<Real>{});  // (store reads the ray of hits only)
                 const Ray ray = rays.ray(k);
-                unsigned* counted = interleave ? &nodes : nullptr;
                 constexpr HitPolicy kAny = HitPolicy::any;
                 if (context.any_hit)
                     store(k, ray,

@@ -234,26 +234,19 @@ def _sweep_cases():
 
     # beams at multiples of 45 degrees pass within rounding of the box's edges and corners
     edges = ("box edges", pv.Box(level=3).triangulate(), vrc.Lidar((0, 0, 0), [-45, -35.26438968, 0, 45], 360))
+
+    def height_field(n: int) -> pv.PolyData:
+        x = np.linspace(0.0, 10.0, n)
+        xx, yy = np.meshgrid(x, x, indexing="xy")
+        ground = pv.StructuredGrid(xx, yy, 0.6 * np.sin(1.3 * xx) * np.cos(0.9 * yy) + 0.05 * xx)
+        return ground.extract_surface().triangulate()
+
     # 64 steps put tiles of 90 degrees over a height field: some of them take more nodes
     # than their rays would and go ray by ray, the others stay bundles
-    x = np.linspace(0.0, 10.0, 120)
-    xx, yy = np.meshgrid(x, x, indexing="xy")
-    ground = pv.StructuredGrid(xx, yy, 0.6 * np.sin(1.3 * xx) * np.cos(0.9 * yy) + 0.05 * xx)
-    coarse = (
-        "coarse steps",
-        ground.extract_surface().triangulate(),
-        vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 16), 64),
-    )
+    coarse = ("coarse steps", height_field(120), vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 16), 64))
     # over a finer height field, the rows of tiles whose beams graze it: a cut bundle sends
     # the next tiles of its row ray by ray, later ones try bundles again on a smaller budget
-    x = np.linspace(0.0, 10.0, 400)
-    xx, yy = np.meshgrid(x, x, indexing="xy")
-    fine = pv.StructuredGrid(xx, yy, 0.6 * np.sin(1.3 * xx) * np.cos(0.9 * yy) + 0.05 * xx)
-    grazing = (
-        "grazing rows",
-        fine.extract_surface().triangulate(),
-        vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 32), 256),
-    )
+    grazing = ("grazing rows", height_field(400), vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 32), 256))
     return [inside, outside, far, ranged, poles, edges, coarse, grazing]
 
 
