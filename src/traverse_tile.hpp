@@ -174,6 +174,7 @@ class TileTracer {
     /// between them, each pixel written once.
     template <class Store>
     void finish(Store& store) {
+        if (!by_triangle_) complete_sure_hits();
         uint64_t hits[kStride];
         std::size_t n_hits = 0;
         for (int64_t r = 0; r < height_; ++r) {
@@ -186,7 +187,6 @@ class TileTracer {
                 store.prefetch(hit_prims_[n_hits++] = sure_[__builtin_ctzll(m) + r * kStride]);
         }
         store.prefetch_rows(hit_prims_, n_hits);
-        if (!by_triangle_) store_sure_hits(store);
         for (int64_t r = 0; r < height_; ++r)
             for (int64_t c = 0; c < width_;) {
                 const int64_t j = c + r * kStride;
@@ -197,20 +197,21 @@ class TileTracer {
                     c += run;
                     continue;
                 }
-                if (sure_bits_[r] >> c & 1) {
-                    if (by_triangle_) store.settled(pixel(j), sure_[j]);  // (else stored already)
-                } else
+                if (sure_bits_[r] >> c & 1)
+                    store.settled(pixel(j), sure_[j]);
+                else
                     store(pixel(j), ray_[j], hit_[j]);
                 ++c;
             }
     }
 
-    /// Stores the pixels settled by sure hits when the cast asks for their depth or
-    /// weights: each pixel's ray is made and tested on its sure hit alone (the only triangle
-    /// it can hit first, see test_pixel), four at a time in the lanes of watertight4, or
-    /// with the scalar kernel for a lane it leaves.
-    template <class Store>
-    void store_sure_hits(Store& store) {
+    /// Makes the pixels settled by sure hits hits of rays made, when the cast asks for their
+    /// depth or weights: each pixel's ray is tested on its sure hit alone (the only triangle
+    /// it can hit first, see test_pixel), four at a time in the lanes of watertight4, or with
+    /// the scalar kernel for a lane it leaves. All of a tile's are tested before any is
+    /// stored: the tests' long chains of divisions then overlap, where a store after each
+    /// group of four waited on them.
+    void complete_sure_hits() {
 #if defined(__AVX2__)
         int64_t lane_pixel[4], col[4], row[4];
         int n = 0;
@@ -228,9 +229,10 @@ class TileTracer {
             const unsigned settled = made & watertight4(rays, corner, context_.cull_back_faces, t, b);
             for (int l = 0; l < n; ++l) {
                 const int64_t j = lane_pixel[l];
-                Hit<Real> hit;
-                Ray ray;  // (the store reads only the ray's depth scale)
-                if (settled >> l & 1) {
+                Hit<Real>& hit = hit_[j];
+                Ray& ray = ray_[j];
+                hit = Hit<Real>{};
+                if (settled >> l & 1) {  // (a store reads only the ray's depth scale)
                     hit.t = t[l], hit.prim = sure_[j];
                     for (int c = 0; c < 3; ++c) hit.b[c] = b[l][c];
                     ray.t_unit = rays_.t_unit();
@@ -240,20 +242,20 @@ class TileTracer {
                     double bound = ray.tmax;
                     test_triangle(Kernel(ray, context_), scene_, sure_[j], ray.tmin, bound, hit);
                 }
-                store(pixel(j), ray, hit);
             }
             n = 0;
         };
-        for (int64_t r = 0; r < height_; ++r)
+        for (int64_t r = 0; r < height_; ++r) {
             for (uint64_t m = sure_bits_[r]; m != 0; m &= m - 1) {
                 const int64_t j = __builtin_ctzll(m) + r * kStride;
                 col[n] = i0_ + j % kStride, row[n] = r0_ + j / kStride;
                 lane_pixel[n++] = j;
                 if (n == 4) flush();
             }
+            made_[r] |= sure_bits_[r];
+        }
         if (n != 0) flush();
-#else
-        (void)store;
+        std::fill(sure_bits_, sure_bits_ + kStride, 0);
 #endif
     }
 
@@ -496,7 +498,7 @@ class TileTracer {
     /// and the kernel tests the sure hit, then it: the kernel decides every close call.
     /// When the cast asks for the hit's depth or weights, the rays of the pixels still
     /// settled so are made once the tile is traversed, and tested on their sure hit alone
-    /// (store_sure_hits).
+    /// (complete_sure_hits).
     bool test_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF) {
         const int64_t j = c + r * kStride;
         const uint64_t bit = uint64_t(1) << c;
