@@ -46,7 +46,9 @@ nb::ndarray<nb::numpy, T> owned_array(T* data, std::size_t rows, std::size_t wid
 
 unsigned resolve_threads(int threads) {
     if (threads < 0) throw std::invalid_argument("threads must be >= 1 (or None for all cores)");
-    return threads == 0 ? std::max(1u, std::thread::hardware_concurrency()) : unsigned(threads);
+    // (asked once: glibc reads /sys for it, which took longer than casting a ray)
+    static const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+    return threads == 0 ? cores : unsigned(threads);
 }
 
 /// Polls from the calling thread: re-takes the GIL, lets Ctrl-C and the Python callback
