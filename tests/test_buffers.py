@@ -104,10 +104,10 @@ def test_filter_outputs_copied_downstream_keep_their_arrays():
 def test_intersect_results_held_are_never_written_again(scene_and_cameras):
     scene = scene_and_cameras[0]
     rng = np.random.default_rng(5)
-    origins = rng.normal(size=(500, 3)) * 3
+    origins = rng.normal(size=(5000, 3)) * 3
     first = scene.intersect(origins, -origins)
     kept = {name: array.copy() for name, array in first.items()}
-    dropped = {address(scene.intersect(origins, rng.normal(size=(500, 3)))["t"]) for _ in range(4)}
+    dropped = {address(scene.intersect(origins, rng.normal(size=(5000, 3)))["t"]) for _ in range(4)}
     assert address(first["t"]) not in dropped
     for name, array in kept.items():
         np.testing.assert_array_equal(first[name], array)
@@ -115,3 +115,23 @@ def test_intersect_results_held_are_never_written_again(scene_and_cameras):
     assert address(again["t"]) in dropped  # (the dropped results lend their memory)
     for name, array in kept.items():
         np.testing.assert_array_equal(again[name], array)
+
+
+def test_small_batches_leave_the_kept_arrays_alone(scene_and_cameras):
+    # A few rays' arrays are made fresh, not kept: they neither take an image's dropped
+    # arrays nor push them out of the pool.
+    scene, near, _ = scene_and_cameras
+    image = scene.cast(near)
+    depth_at = address(image["Depth"])
+    del image
+    gc.collect()
+    kept = scene.kept_output_bytes
+    rng = np.random.default_rng(6)
+    for n in (1, 100, 1000):
+        origins = rng.normal(size=(n, 3)) * 3
+        hits = scene.intersect(origins, -origins)
+        assert address(hits["t"]) != depth_at
+        del hits
+        gc.collect()
+        assert scene.kept_output_bytes == kept
+    assert address(scene.cast(near)["Depth"]) == depth_at

@@ -11,6 +11,7 @@ made from it is alive, so nothing a user can reach ever changes under them.
 
 from __future__ import annotations
 
+import math
 import sys
 import threading
 from collections import deque
@@ -28,6 +29,7 @@ def _count_alone() -> int:
 
 
 _ALONE = _count_alone()
+SMALL = 1 << 16  #: bytes: malloc serves this little from its heap, already faulted in
 
 
 class BufferPool:
@@ -39,7 +41,12 @@ class BufferPool:
 
     def allocate(self, layouts: dict[str, tuple[np.dtype, tuple[int, ...]]]) -> dict[str, np.ndarray]:
         """Uninitialised arrays of the given dtypes and shapes, by name: kept ones that
-        nobody else holds, else new ones. They join the pool as the latest generation."""
+        nobody else holds, else new ones. They join the pool as the latest generation.
+        Small casts' arrays (under SMALL bytes in all) are new and not kept: looking for
+        them cost a small batch of rays more than making them, and keeping them would push
+        an image's arrays out of the pool."""
+        if sum(dtype.itemsize * math.prod(shape) for dtype, shape in layouts.values()) < SMALL:
+            return {name: np.empty(shape, dtype) for name, (dtype, shape) in layouts.items()}
         out = {}
         with self._lock:
             for name, (dtype, shape) in layouts.items():

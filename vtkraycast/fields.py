@@ -147,15 +147,15 @@ def request_outputs(
     request: _core.Request, mesh: PreparedMesh, found: MeshArrays, buffers: dict[str, np.ndarray]
 ) -> None:
     """Points ``request`` at the output arrays ``buffers`` and the mesh data they need."""
-    rows = {"point": mesh.surface.GetNumberOfPoints(), "cell": mesh.surface.GetNumberOfCells()}
     for name, out in buffers.items():
         if name in _GEOMETRY:
             setattr(request, _GEOMETRY[name][0], out)
             continue
         kind = "point" if name in found.point else "cell"
         values = getattr(found, kind)[name]
-        if values.shape[0] != rows[kind]:  # (VTK lets an array's length disagree with its mesh)
-            raise ValueError(f"{kind} array {name!r} has {values.shape[0]} tuples for {rows[kind]} {kind}s")
+        rows = {"point": mesh.surface.GetNumberOfPoints, "cell": mesh.surface.GetNumberOfCells}[kind]()
+        if values.shape[0] != rows:  # (VTK lets an array's length disagree with its mesh)
+            raise ValueError(f"{kind} array {name!r} has {values.shape[0]} tuples for {rows} {kind}s")
         request.add_field(values, out, kind == "point")
     request.cells_are_triangles = mesh.cells_are_triangles
     if "CellId" in buffers and not mesh.cells_are_triangles:

@@ -34,11 +34,13 @@ def exponent(x: float) -> int:
 
 class Scale(NamedTuple):
     """Lengths in the core are 2**shift times the user's; ``centre`` and ``size`` are the
-    scene's box (user units), which the range limits are measured from."""
+    scene's box (user units), which the range limits are measured from; ``reach`` the
+    centre's largest coordinate magnitude."""
 
     shift: int
     centre: np.ndarray
     size: float
+    reach: float
 
     def check_origins(
         self, points: np.ndarray, real: type, what: str, *, extent: tuple[float, float] | None = None
@@ -52,7 +54,7 @@ class Scale(NamedTuple):
         limit = math.ldexp(1.0, LIMIT[real] - self.shift)
         if extent is None:  # (a bound first: one pass over contiguous memory is cheap)
             extent = float(points.min()), float(points.max())
-        if max(-extent[0], extent[1]) + float(np.abs(self.centre).max()) <= limit:
+        if max(-extent[0], extent[1]) + self.reach <= limit:
             return
         with np.errstate(over="ignore"):  # (an overflow is beyond every limit)
             far = max(float(np.abs(points[:, k] - self.centre[k]).max()) for k in range(3))
@@ -68,15 +70,16 @@ def scene_scale(bounds) -> Scale:
     triangles use to about 1 across (none when it is between 2**-SCENE_SAFE and 2**SCENE_SAFE)."""
     low, high = np.asarray(bounds[0::2], float), np.asarray(bounds[1::2], float)
     if not (np.isfinite(low).all() and np.isfinite(high).all()):  # no triangles
-        return Scale(0, np.zeros(3), 0.0)
+        return Scale(0, np.zeros(3), 0.0, 0.0)
     half = float((high / 2 - low / 2).max())  # halves: the difference itself may overflow
     if half == 0:  # a single point: its magnitude is the only scale there is
         half = float(np.abs(high).max()) / 2
     size = 2 * half if half <= np.finfo(np.float64).max / 2 else math.inf
     centre = low / 2 + high / 2
+    reach = float(np.abs(centre).max())
     if half == 0 or -SCENE_SAFE <= exponent(half) + 1 <= SCENE_SAFE:
-        return Scale(0, centre, size)
-    return Scale(-(exponent(half) + 1), centre, size)
+        return Scale(0, centre, size, reach)
+    return Scale(-(exponent(half) + 1), centre, size, reach)
 
 
 def direction_shifts(
