@@ -133,6 +133,18 @@ def main() -> None:
     args = parser.parse_args()
     context = multiprocessing.get_context("spawn")
     pipes, children = [], []
+
+    def receive(k: int):
+        try:
+            return pipes[k].recv()
+        except EOFError:
+            children[k].join(5)
+            for child in children:
+                child.kill()
+            raise SystemExit(
+                f"the process of {args.builds[k]} ended (exit code {children[k].exitcode}): see above"
+            ) from None
+
     for build in args.builds:
         ours, theirs = context.Pipe()
         child = context.Process(
@@ -140,13 +152,14 @@ def main() -> None:
             args=(str(build.resolve()), args, theirs),
         )
         child.start()
-        ours.recv()  # one build at a time: the scenes are not built while another casts
+        theirs.close()  # (the child's end held here too, a child that died would never be noticed)
         pipes.append(ours)
         children.append(child)
+        receive(len(pipes) - 1)  # one build at a time: the scenes are not built while another casts
 
     def cast(k: int) -> tuple[float, np.ndarray]:
         pipes[k].send(True)
-        return pipes[k].recv()
+        return receive(k)
 
     first = [cast(k)[1] for k in range(len(pipes))]
     for k in range(len(pipes)):
