@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <limits>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "bvh.hpp"
@@ -65,9 +66,10 @@ class OutputWriter {
     static constexpr Real kNaN = std::numeric_limits<Real>::quiet_NaN();
 
    public:
-    OutputWriter(const Scene& scene, const Outputs<Real>& out)
-        : scene_(scene), out_(out),
-          point_fields_(std::any_of(out.fields.begin(), out.fields.end(), [](const Field& f) { return f.per_point; })) {}
+    OutputWriter(const Scene& scene, const Outputs<Real>& out) : scene_(scene), out_(out) {
+        for (const Field& f : out.fields)
+            if (f.per_point) point_fields_.push_back({&f, interpolator(f)});
+    }
 
     /// Ray k's closest hit (or a miss when none is found); `ray` is read on hits only.
     void operator()(std::size_t k, const Ray& ray, const Hit<Real>& hit) const {
@@ -84,11 +86,10 @@ class OutputWriter {
                 out_.position[3 * k + a] = static_cast<Real>(p);
             }
         }
-        if (point_fields_) {
+        if (!point_fields_.empty()) {
             const uint32_t corners[3] = {scene_.input_point(hit.prim, 0), scene_.input_point(hit.prim, 1),
                                          scene_.input_point(hit.prim, 2)};
-            for (const Field& f : out_.fields)
-                if (f.per_point) interpolate(f, k, corners, hit.b);
+            for (const auto& [f, interpolate] : point_fields_) interpolate(*f, k, corners, hit.b);
         }
     }
 
@@ -103,12 +104,12 @@ class OutputWriter {
     /// Asks the cache for the rows of the point arrays the hits on triangles `prims` read
     /// (scattered in the mesh's point order: the interpolation's loads stalled on them).
     void prefetch_rows(const uint32_t* prims, std::size_t n) const {
-        if (!point_fields_) return;
+        if (point_fields_.empty()) return;
         for (std::size_t i = 0; i < n; ++i)
             for (int c = 0; c < 3; ++c) {
                 const std::size_t row = scene_.input_point(prims[i], c);
-                for (const Field& f : out_.fields)
-                    if (f.per_point) __builtin_prefetch(static_cast<const char*>(f.values) + row * f.row_bytes);
+                for (const auto& [f, interpolate] : point_fields_)
+                    __builtin_prefetch(static_cast<const char*>(f->values) + row * f->row_bytes);
             }
     }
 
@@ -178,24 +179,42 @@ class OutputWriter {
         std::copy_n(from, f.components, static_cast<T*>(f.out) + k * f.components);
     }
 
-    /// Point field f at ray k's hit on the triangle of input points `corners`, weights b.
-    static void interpolate(const Field& f, std::size_t k, const uint32_t* corners, const Real b[3]) {
+    /// Writes point field f at ray k's hit on the triangle of input points `corners`, weights b.
+    using Interpolate = void (*)(const Field& f, std::size_t k, const uint32_t* corners, const Real b[3]);
+
+    /// The interpolation of field f, made for its type and, for one or three components,
+    /// their number: chosen once per cast, not per hit (a terrain's two point arrays took
+    /// longer to interpolate than their scattered rows took to load).
+    static Interpolate interpolator(const Field& f) {
+        Interpolate chosen = nullptr;
         with_type(f.dtype, [&](auto zero) {
             using T = decltype(zero);
-            const T* values = static_cast<const T*>(f.values);
-            T* out = static_cast<T*>(f.out) + k * f.components;
-            if constexpr (std::is_floating_point_v<T>) {
-                // the weighted sum in double, in the weights' order (as numpy's reference)
-                for (uint32_t j = 0; j < f.components; ++j) {
-                    double v = 0;
-                    for (int c = 0; c < 3; ++c) v += double(b[c]) * double(values[std::size_t(corners[c]) * f.components + j]);
-                    out[j] = static_cast<T>(v);
-                }
-            } else {
-                const int c = b[1] > b[0] ? (b[2] > b[1] ? 2 : 1) : (b[2] > b[0] ? 2 : 0);
-                copy_row(f, zero, corners[c], k);
-            }
+            chosen = f.components == 1   ? &interpolate_as<T, 1>
+                     : f.components == 3 ? &interpolate_as<T, 3>
+                                         : &interpolate_as<T, 0>;
         });
+        return chosen;
+    }
+
+    /// kComponents: the field's components, or 0 for any number.
+    template <class T, uint32_t kComponents>
+    static void interpolate_as(const Field& f, std::size_t k, const uint32_t* corners, const Real b[3]) {
+        const uint32_t n = kComponents != 0 ? kComponents : f.components;
+        const T* values = static_cast<const T*>(f.values);
+        T* out = static_cast<T*>(f.out) + k * n;
+        if constexpr (std::is_floating_point_v<T>) {
+            const T* rows[3] = {values + std::size_t(corners[0]) * n, values + std::size_t(corners[1]) * n,
+                                values + std::size_t(corners[2]) * n};
+            // the weighted sum in double, in the weights' order (as numpy's reference)
+            for (uint32_t j = 0; j < n; ++j) {
+                double v = 0;
+                for (int c = 0; c < 3; ++c) v += double(b[c]) * double(rows[c][j]);
+                out[j] = static_cast<T>(v);
+            }
+        } else {
+            const int c = b[1] > b[0] ? (b[2] > b[1] ? 2 : 1) : (b[2] > b[0] ? 2 : 0);
+            std::copy_n(values + std::size_t(corners[c]) * n, n, out);
+        }
     }
 
     /// The unit normal of triangle `prim`: (B - A) x (C - A), normalised.
@@ -210,7 +229,7 @@ class OutputWriter {
 
     const Scene& scene_;
     const Outputs<Real>& out_;
-    bool point_fields_;  ///< whether any field is a point field
+    std::vector<std::pair<const Field*, Interpolate>> point_fields_;  ///< the point fields, each with its interpolation
 };
 
 }  // namespace vrc
