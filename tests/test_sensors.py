@@ -239,7 +239,7 @@ def _sweep_cases():
         x = np.linspace(0.0, 10.0, n)
         xx, yy = np.meshgrid(x, x, indexing="xy")
         ground = pv.StructuredGrid(xx, yy, 0.6 * np.sin(1.3 * xx) * np.cos(0.9 * yy) + 0.05 * xx)
-        return ground.extract_surface().triangulate()
+        return ground.extract_surface(algorithm="dataset_surface").triangulate()
 
     # 64 steps put tiles of 90 degrees over a height field: some of them take more nodes
     # than their rays would and go ray by ray, the others stay bundles
