@@ -68,7 +68,10 @@ class OutputWriter {
    public:
     OutputWriter(const Scene& scene, const Outputs<Real>& out) : scene_(scene), out_(out) {
         for (const Field& f : out.fields)
-            if (f.per_point) point_fields_.push_back({&f, interpolator(f)});
+            if (f.per_point)
+                point_fields_.push_back({&f, interpolator(f)});
+            else
+                cell_fields_.push_back({&f, copier(f)});
     }
 
     /// Ray k's closest hit (or a miss when none is found); `ray` is read on hits only.
@@ -139,9 +142,10 @@ class OutputWriter {
         if (out_.composite_index) out_.composite_index[k] = out_.composite_ids[input];
         if (out_.valid) out_.valid[k] = 1;
         if (out_.normal) unit_normal(prim, out_.normal + 3 * k);
-        for (const Field& f : out_.fields)
-            if (!f.per_point)
-                with_type(f.dtype, [&](auto zero) { copy_row(f, zero, cell_row(input), k); });
+        if (!cell_fields_.empty()) {
+            const std::size_t row = cell_row(input);
+            for (const auto& [f, copy] : cell_fields_) copy(*f, row, k);
+        }
         return input;
     }
 
@@ -173,10 +177,24 @@ class OutputWriter {
         std::fill_n(static_cast<T*>(f.out) + k * f.components, n * f.components, missing);
     }
 
-    template <class T>
-    static void copy_row(const Field& f, T, std::size_t row, std::size_t k) {
-        const T* from = static_cast<const T*>(f.values) + row * f.components;
-        std::copy_n(from, f.components, static_cast<T*>(f.out) + k * f.components);
+    /// Copies row `row` of cell field f to ray k's output row.
+    using Copy = void (*)(const Field& f, std::size_t row, std::size_t k);
+
+    /// The copy of field f's rows, made for its type and, for one or three components,
+    /// their number (as interpolator).
+    static Copy copier(const Field& f) {
+        Copy chosen = nullptr;
+        with_type(f.dtype, [&](auto zero) {
+            using T = decltype(zero);
+            chosen = f.components == 1 ? &copy_as<T, 1> : f.components == 3 ? &copy_as<T, 3> : &copy_as<T, 0>;
+        });
+        return chosen;
+    }
+
+    template <class T, uint32_t kComponents>
+    static void copy_as(const Field& f, std::size_t row, std::size_t k) {
+        const uint32_t n = kComponents != 0 ? kComponents : f.components;
+        std::copy_n(static_cast<const T*>(f.values) + row * n, n, static_cast<T*>(f.out) + k * n);
     }
 
     /// Writes point field f at ray k's hit on the triangle of input points `corners`, weights b.
@@ -230,6 +248,7 @@ class OutputWriter {
     const Scene& scene_;
     const Outputs<Real>& out_;
     std::vector<std::pair<const Field*, Interpolate>> point_fields_;  ///< the point fields, each with its interpolation
+    std::vector<std::pair<const Field*, Copy>> cell_fields_;         ///< the cell fields, each with its copy
 };
 
 }  // namespace vrc
