@@ -28,6 +28,15 @@ def address(array) -> int:
     return np.asarray(array).__array_interface__["data"][0]
 
 
+def dropped_image_depth(scene, camera) -> int:
+    """The address of the Depth array of an image cast and dropped (its arrays now the pool's alone)."""
+    image = scene.cast(camera)
+    depth_at = address(image["Depth"])
+    del image
+    gc.collect()
+    return depth_at
+
+
 def test_images_held_are_never_written_again(scene_and_cameras):
     scene, near, far = scene_and_cameras
     held = [scene.cast(near), scene.cast(far)]
@@ -56,10 +65,7 @@ def test_arrays_and_views_outlive_their_image(scene_and_cameras):
 
 def test_dropped_images_lend_their_memory(scene_and_cameras):
     scene, near, far = scene_and_cameras
-    image = scene.cast(near)
-    depth_at = address(image["Depth"])
-    del image
-    gc.collect()
+    depth_at = dropped_image_depth(scene, near)
     assert scene.kept_output_bytes >= 64 * 48 * 8
     again = scene.cast(far)
     assert address(again["Depth"]) == depth_at
@@ -121,10 +127,7 @@ def test_small_batches_leave_the_kept_arrays_alone(scene_and_cameras):
     # A few rays' arrays are made fresh, not kept: they neither take an image's dropped
     # arrays nor push them out of the pool.
     scene, near, _ = scene_and_cameras
-    image = scene.cast(near)
-    depth_at = address(image["Depth"])
-    del image
-    gc.collect()
+    depth_at = dropped_image_depth(scene, near)
     kept = scene.kept_output_bytes
     rng = np.random.default_rng(6)
     for n in (1, 100, 1000):
