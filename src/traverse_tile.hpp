@@ -209,8 +209,8 @@ class TileTracer {
     /// depth or weights: each pixel's ray is tested on its sure hit alone (the only triangle
     /// it can hit first, see test_pixel), four at a time in the lanes of watertight4, or with
     /// the scalar kernel for a lane it leaves. All of a tile's are tested before any is
-    /// stored: the tests' long chains of divisions then overlap, where a store after each
-    /// group of four waited on them.
+    /// stored, so that the tests' long chains of divisions overlap one another (stores in
+    /// between would each wait on theirs).
     void complete_sure_hits() {
 #if defined(__AVX2__)
         int64_t lane_pixel[4], col[4], row[4];
