@@ -181,8 +181,8 @@ def test_progress_events_and_abort():
     camera.Azimuth(5)
     caster.Update()
     assert caster.GetOutput().GetNumberOfPoints() == 0  # stopped before the end: no partial image
-    aborted = progress[n_full:]
-    assert max(p for p in aborted if p < 1) < 0.5 and len(aborted) < n_full
+    # stopped at the very event that asked (the cast's share done by then is the machine's)
+    assert len([p for p in progress[n_full:] if 0 < p < 1]) == 1
     caster.RemoveObserver(tag)
     camera.Azimuth(5)
     caster.Update()  # the next update runs to the end again
