@@ -9,15 +9,17 @@
 namespace vrc {
 
 /// Each way is tried once, then the cheaper one is used, and the other is tried again every
-/// kProbe picks so that a change of the work (or of the machine's load) shows. Costs are
+/// `probe` picks so that a change of the work (or of the machine's load) shows. Costs are
 /// seconds per unit of work, averaged with the last ones. Only speed depends on the pick.
 class CostChooser {
    public:
+    /// `first`: the way tried first; `probe`: the other way is tried again every `probe` picks.
+    explicit CostChooser(bool first = false, unsigned probe = 16) : first_(first), probe_(probe) {}
     [[nodiscard]] bool pick() {
-        if (cost_[0] < 0) return false;
-        if (cost_[1] < 0) return true;
+        if (cost_[first_] < 0) return first_;
+        if (cost_[!first_] < 0) return !first_;
         const bool cheaper = cost_[1] < cost_[0];
-        return ++picks_ % kProbe == 0 ? !cheaper : cheaper;
+        return ++picks_ % probe_ == 0 ? !cheaper : cheaper;
     }
     void record(bool way, double seconds_per_unit) {
         double& cost = cost_[way ? 1 : 0];
@@ -35,7 +37,8 @@ class CostChooser {
     }
 
    private:
-    static constexpr unsigned kProbe = 16;
+    bool first_;
+    unsigned probe_;
     double cost_[2] = {-1, -1};
     unsigned picks_ = 0;
 };

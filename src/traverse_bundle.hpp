@@ -131,13 +131,39 @@ class BundleTracer {
         // A bundle too wide to project, incoherent, or costlier than its rays (see
         // traverse and RowHistory): ray by ray.
         RowHistory& history = history_[std::size_t(rays_.tile_row(tile))];
-        bool cut = false;
-        if (history.single_tiles > 0) {
-            --history.single_tiles;
-        } else if (enclose()) {
-            cut = !traverse(history.visit_budget() * n_);
-            if (!cut) return store_tile(store);
+        history.bundles.run([&](bool bundle) {
+            if (bundle && enclose() && traverse(history.visit_budget() * n_)) return double(n_);
+            trace_by_ray(history);
+            return double(n_);
+        });
+        store_tile(store);
+    }
+
+   private:
+    /// What a worker has seen of a row of tiles: neighbouring tiles of a sweep cost alike
+    /// (a lidar's rings meet a height field at the same range all around), so the row's
+    /// tiles go as bundles or ray by ray, whichever the worker measures cheaper per ray
+    /// there (the other tried again every 64th tile: ray by ray, a frog's tile takes 2x to
+    /// 3x its bundle's time), and the nodes the row's rays tested bound what a bundle may
+    /// spend before it is cut and its rays go one by one. A bundle's visit of a node or
+    /// leaf costs about as much as ten node tests of a single ray (1,100 cycles against 90
+    /// to 170, rdtsc on the frog's and the terrain's scans): on the frog, whose rays test
+    /// 20 to 30 nodes, bundles of up to 2 visits per ray took 0.3x to 0.5x the time of
+    /// their rays traced one by one; on the terrain, whose rays test 2.5 to 11, bundles
+    /// within that bound still took longer than their rays.
+    struct RowHistory {
+        static constexpr double kNodesPerVisit = 10;
+        double nodes_per_ray = -1;      // of the row's last tile traced ray by ray (-1: none yet)
+        CostChooser bundles{true, 64};  // the row's tiles as bundles (tried first), or ray by ray
+        CostChooser by_ray;             // rays one after another, or several in flight (a large scene's)
+        [[nodiscard]] double visit_budget() const {
+            return nodes_per_ray < 0 ? kVisitsPerRay : std::clamp(nodes_per_ray / kNodesPerVisit, 0.25, double(kVisitsPerRay));
         }
+    };
+
+    /// Traces the tile's rays one by one: one after another, or several in flight where
+    /// the scene is larger than the caches and the worker measures that cheaper.
+    void trace_by_ray(RowHistory& history) {
         unsigned nodes = 0;
         const auto by_ray = [&](bool interleaved) {
             if (!interleaved) {
@@ -156,30 +182,7 @@ class BundleTracer {
         else
             by_ray(false);
         history.nodes_per_ray = double(nodes) / n_;
-        if (cut) history.single_tiles = RowHistory::kSingleAfterCut;
-        store_tile(store);
     }
-
-   private:
-    /// What a worker has seen of a row of tiles: neighbouring tiles of a sweep cost alike
-    /// (a lidar's rings meet a height field at the same range all around), so one cut
-    /// bundle sends the next tiles of its row ray by ray, and the nodes their rays tested
-    /// bound what a later bundle of the row may spend. A bundle's visit of a node or leaf
-    /// costs about as much as ten node tests of a single ray (1,100 cycles against 90 to
-    /// 170, rdtsc on the frog's and the terrain's scans): on the frog, whose rays test 20 to
-    /// 30 nodes, bundles of up to 2 visits per ray took 0.3x to 0.5x the time of their rays
-    /// traced one by one; on the terrain, whose rays test 2.5 to 11, bundles of more than
-    /// 0.25 visits per ray took 1.3x to 2.7x.
-    struct RowHistory {
-        static constexpr double kNodesPerVisit = 10;
-        static constexpr int kSingleAfterCut = 3;
-        double nodes_per_ray = -1;  // of the row's last tile traced ray by ray (-1: none yet)
-        int single_tiles = 0;       // tiles of the row still to go ray by ray
-        CostChooser by_ray;         // rays one after another, or several in flight (a large scene's)
-        [[nodiscard]] double visit_budget() const {
-            return nodes_per_ray < 0 ? kVisitsPerRay : std::clamp(nodes_per_ray / kNodesPerVisit, 0.25, double(kVisitsPerRay));
-        }
-    };
 
     /// The tile's rays by their place in it, as trace_rays_interleaved asks for them.
     struct TileRays {

@@ -244,8 +244,8 @@ def _sweep_cases():
     # 64 steps put tiles of 90 degrees over a height field: some of them take more nodes
     # than their rays would and go ray by ray, the others stay bundles
     coarse = ("coarse steps", height_field(120), vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 16), 64))
-    # over a finer height field, the rows of tiles whose beams graze it: a cut bundle sends
-    # the next tiles of its row ray by ray, later ones try bundles again on a smaller budget
+    # over a finer height field, the rows of tiles whose beams graze it: bundles cut short,
+    # budgets from the row's rays, rows going on as bundles or ray by ray, whichever is cheaper
     grazing = ("grazing rows", height_field(400), vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 32), 256))
     return [inside, outside, far, ranged, poles, edges, coarse, grazing]
 
