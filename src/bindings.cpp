@@ -7,6 +7,7 @@
 #include <nanobind/stl/function.h>
 #include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
 
 #include <algorithm>
 #include <array>
@@ -26,6 +27,7 @@
 #include "kernel_watertight.hpp"
 #include "ray_extent.hpp"
 #include "render.hpp"
+#include "take_rows.hpp"
 
 namespace nb = nanobind;
 using namespace nb::literals;
@@ -504,6 +506,31 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         "points"_a, "low"_a, "high"_a, "direction"_a,
         "Per point, `direction` with each component's sign towards the nearer side of the box [low, high] on its "
         "axis: a ray that leaves the box through its nearest face.");
+    m.def(
+        "take_rows",
+        [](std::vector<ConstAnyArray> sources, CellMap rows, std::vector<AnyArray> outputs, int threads) {
+            if (sources.size() != outputs.size()) throw std::invalid_argument("take_rows needs an output per source");
+            const std::size_t n = rows.shape(0);
+            std::size_t least = SIZE_MAX;  // rows of the shortest source
+            std::vector<vrc::RowCopy> copies;
+            for (std::size_t k = 0; k < sources.size(); ++k) {
+                const ConstAnyArray& from = sources[k];
+                const AnyArray& to = outputs[k];
+                if (from.ndim() == 0 || to.ndim() == 0 || to.shape(0) != n || from.dtype() != to.dtype() ||
+                    from.nbytes() / std::max<std::size_t>(from.shape(0), 1) != to.nbytes() / std::max<std::size_t>(n, 1))
+                    throw std::invalid_argument("take_rows: each output must have a row per index and its source's rows");
+                copies.push_back({static_cast<const char*>(from.data()), static_cast<char*>(to.data()), n ? to.nbytes() / n : 0});
+                least = std::min<std::size_t>(least, from.shape(0));
+            }
+            for (std::size_t i = 0; i < n && !copies.empty(); ++i)
+                if (rows.data()[i] < 0 || std::size_t(rows.data()[i]) >= least)
+                    throw std::invalid_argument("take_rows: row index out of range");
+            nb::gil_scoped_release release;
+            vrc::take_rows(copies, rows.data(), n, resolve_threads(threads));
+        },
+        "sources"_a, "rows"_a, "outputs"_a, "threads"_a,
+        "Writes rows `rows` of each source array into its output (a row per index, the source's row size and "
+        "type), on several threads.");
     m.def(
         "cpu_supports_avx2",
         [] { return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"); },

@@ -403,20 +403,20 @@ class Scene:
         returned = np.isfinite(ranges)
         every = bool(returned.all())
         beams = slice(None) if every else np.flatnonzero(returned)
+        kept = [name for name in names if name not in ("Depth", "Position", "vtkValidPointMask")]
+        picked = [buffers["Position"], ranges, *(buffers[name] for name in kept)]
+        if not every:  # the returns' rows (every beam returned: the arrays the core wrote)
+            taken = [np.empty((len(beams), *a.shape[1:]), a.dtype) for a in picked]
+            _core.take_rows(picked, beams, taken, _threads(threads))
+            picked = taken
 
-        def pick(values: np.ndarray) -> np.ndarray:
-            # every beam returned: the arrays the core wrote, as cast() hands them out; else
-            # the returns' rows (taken by index: a boolean mask on (n, 3) is 5x slower)
-            return values if every else values.take(beams, axis=0)
-
-        cloud = pv.PolyData(pick(buffers["Position"]))
-        cloud.point_data["Range"] = pick(ranges)
+        cloud = pv.PolyData(picked[0])
+        cloud.point_data["Range"] = picked[1]
         cloud.point_data["Elevation"] = lidar.elevations[ring[beams]]
         cloud.point_data["Azimuth"] = azimuth[beams].copy()
         cloud.point_data["Ring"] = ring[beams].astype(np.int32)
-        for name in names:
-            if name not in ("Depth", "Position", "vtkValidPointMask"):
-                cloud.point_data[name] = pick(buffers[name])
+        for name, values in zip(kept, picked[2:]):
+            cloud.point_data[name] = values
         if range_image:
             return cloud, ranges.reshape(len(lidar.elevations), lidar.azimuth_steps).copy()
         return cloud
