@@ -260,10 +260,14 @@ def test_scan_equals_intersect_bit_for_bit(case):
     name, mesh, lidar = case
     scene = vrc.Scene(mesh)
     cloud, ranges = scene.scan(lidar, range_image=True)
-    origins, directions, _, _ = lidar.rays()
+    origins, directions, ring, azimuth = lidar.rays()
     reference = scene.intersect(origins, directions, tmin=lidar.min_range, tmax=lidar.max_range,
                                 arrays=["triangle_id", "t", "barycentric", "position"])  # fmt: skip
     hit = reference["triangle_id"] >= 0
+    np.testing.assert_array_equal(cloud["Range"], reference["t"][hit])  # the returns' beams, in order
+    np.testing.assert_array_equal(cloud["Ring"], ring[hit])
+    np.testing.assert_array_equal(cloud["Azimuth"], azimuth[hit])
+    np.testing.assert_array_equal(cloud["Elevation"], lidar.elevations[ring[hit]])
     assert 0 < hit.sum()
     if name in ("inside", "box edges"):  # from inside a closed surface every beam returns
         assert hit.all()

@@ -404,18 +404,20 @@ class Scene:
         every = bool(returned.all())
         beams = slice(None) if every else np.flatnonzero(returned)
         kept = [name for name in names if name not in ("Depth", "Position", "vtkValidPointMask")]
-        picked = [buffers["Position"], ranges, *(buffers[name] for name in kept)]
-        if not every:  # the returns' rows (every beam returned: the arrays the core wrote)
+        picked = [buffers["Position"], ranges, azimuth, ring, *(buffers[name] for name in kept)]
+        if every:  # the arrays the core wrote (the lidar's own, read-only, copied)
+            picked[2:4] = [azimuth.copy(), ring]
+        else:  # the returns' rows
             taken = [np.empty((len(beams), *a.shape[1:]), a.dtype) for a in picked]
             _core.take_rows(picked, beams, taken, _threads(threads))
             picked = taken
 
         cloud = pv.PolyData(picked[0])
         cloud.point_data["Range"] = picked[1]
-        cloud.point_data["Elevation"] = lidar.elevations[ring[beams]]
-        cloud.point_data["Azimuth"] = azimuth[beams].copy()
-        cloud.point_data["Ring"] = ring[beams].astype(np.int32)
-        for name, values in zip(kept, picked[2:]):
+        cloud.point_data["Elevation"] = lidar.elevations[picked[3]]
+        cloud.point_data["Azimuth"] = picked[2]
+        cloud.point_data["Ring"] = picked[3].astype(np.int32)
+        for name, values in zip(kept, picked[4:]):
             cloud.point_data[name] = values
         if range_image:
             return cloud, ranges.reshape(len(lidar.elevations), lidar.azimuth_steps).copy()
