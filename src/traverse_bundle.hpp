@@ -149,8 +149,8 @@ class BundleTracer {
     /// leaf costs about as much as ten node tests of a single ray (1,100 cycles against 90
     /// to 170, rdtsc on the frog's and the terrain's scans): on the frog, whose rays test
     /// 20 to 30 nodes, bundles of up to 2 visits per ray took 0.3x to 0.5x the time of
-    /// their rays traced one by one; on the terrain, whose rays test 2.5 to 11, bundles
-    /// within that bound still took longer than their rays.
+    /// their rays traced one by one; on the terrain, whose rays test 2.5 to 11, the steep
+    /// rings' bundles, cut or not, took 1.1x the time of their rays.
     struct RowHistory {
         static constexpr double kNodesPerVisit = 10;
         double nodes_per_ray = -1;      // of the row's last tile traced ray by ray (-1: none yet)
