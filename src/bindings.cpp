@@ -511,15 +511,20 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         [](std::vector<ConstAnyArray> sources, CellMap rows, std::vector<AnyArray> outputs, int threads) {
             if (sources.size() != outputs.size()) throw std::invalid_argument("take_rows needs an output per source");
             const std::size_t n = rows.shape(0);
+            const auto row_bytes = [](const auto& a) {
+                std::size_t bytes = a.itemsize();
+                for (std::size_t d = 1; d < a.ndim(); ++d) bytes *= a.shape(d);
+                return bytes;
+            };
             std::size_t least = SIZE_MAX;  // rows of the shortest source
             std::vector<vrc::RowCopy> copies;
             for (std::size_t k = 0; k < sources.size(); ++k) {
                 const ConstAnyArray& from = sources[k];
                 const AnyArray& to = outputs[k];
                 if (from.ndim() == 0 || to.ndim() == 0 || to.shape(0) != n || from.dtype() != to.dtype() ||
-                    from.nbytes() / std::max<std::size_t>(from.shape(0), 1) != to.nbytes() / std::max<std::size_t>(n, 1))
+                    row_bytes(from) != row_bytes(to))
                     throw std::invalid_argument("take_rows: each output must have a row per index and its source's rows");
-                copies.push_back({static_cast<const char*>(from.data()), static_cast<char*>(to.data()), n ? to.nbytes() / n : 0});
+                copies.push_back({static_cast<const char*>(from.data()), static_cast<char*>(to.data()), row_bytes(to)});
                 least = std::min<std::size_t>(least, from.shape(0));
             }
             for (std::size_t i = 0; i < n && !copies.empty(); ++i)

@@ -152,6 +152,11 @@ def test_lidar_range_limits():
     assert 0 < inside.sum() < len(inside)
     np.testing.assert_array_equal(np.isfinite(ranges.reshape(-1)), inside)
     assert cloud.n_points == inside.sum()
+    # a range no beam returns within: an empty cloud, with every array
+    cloud, ranges = _box().scan(vrc.Lidar(position, [0.0], 720, min_range=5.0), range_image=True)
+    assert cloud.n_points == 0 and np.isnan(ranges).all()
+    assert {"Range", "Ring", "Azimuth", "Elevation", "TriangleId", "Barycentric"} <= set(cloud.point_data.keys())
+    assert cloud["Barycentric"].shape == (0, 3)
     with pytest.raises(ValueError, match="elevations"):
         vrc.Lidar(position, [100.0], 10)
     with pytest.raises(ValueError, match="azimuth_steps"):

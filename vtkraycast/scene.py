@@ -413,12 +413,10 @@ class Scene:
             picked = taken
 
         cloud = pv.PolyData(picked[0])
-        cloud.point_data["Range"] = picked[1]
-        cloud.point_data["Elevation"] = lidar.elevations[picked[3]]
-        cloud.point_data["Azimuth"] = picked[2]
-        cloud.point_data["Ring"] = picked[3].astype(np.int32)
-        for name, values in zip(kept, picked[4:]):
-            cloud.point_data[name] = values
+        arrays = {"Range": picked[1], "Elevation": lidar.elevations[picked[3]], "Azimuth": picked[2]}
+        arrays |= {"Ring": picked[3].astype(np.int32), **dict(zip(kept, picked[4:]))}
+        for name, values in arrays.items():  # (through VTK: pyvista refuses a cloud of no point's (0, 3) arrays)
+            cloud.GetPointData().AddArray(pv.convert_array(values, name=name))
         if range_image:
             return cloud, ranges.reshape(len(lidar.elevations), lidar.azimuth_steps).copy()
         return cloud
