@@ -153,7 +153,7 @@ def request_outputs(
             continue
         kind = "point" if name in found.point else "cell"
         values = getattr(found, kind)[name]
-        rows = {"point": mesh.surface.GetNumberOfPoints, "cell": mesh.surface.GetNumberOfCells}[kind]()
+        rows = mesh.surface.GetNumberOfPoints() if kind == "point" else mesh.surface.GetNumberOfCells()
         if values.shape[0] != rows:  # (VTK lets an array's length disagree with its mesh)
             raise ValueError(f"{kind} array {name!r} has {values.shape[0]} tuples for {rows} {kind}s")
         request.add_field(values, out, kind == "point")

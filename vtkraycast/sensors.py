@@ -6,6 +6,7 @@ have unit length, so t is the distance."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,6 +44,17 @@ def _point(value: Any, name: str) -> np.ndarray:
     if p.shape != (3,) or not np.isfinite(p).all():
         raise ValueError(f"{name} must be three finite numbers, got {value!r}")
     return p
+
+
+def _kept_rays(sensor: Any, make: Callable[[], tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
+    """The sensor's rays, made by ``make`` at the first call, read-only, and kept on it."""
+    kept = sensor.__dict__.get("_rays")
+    if kept is None:
+        kept = make()
+        for a in kept:
+            a.flags.writeable = False  # (a no-op on the broadcast origins: read-only already)
+        object.__setattr__(sensor, "_rays", kept)  # (not a field of the frozen dataclass)
+    return kept
 
 
 def _frozen(value: Any) -> np.ndarray:
@@ -90,15 +102,14 @@ class Panorama:
     def rays(self) -> tuple[np.ndarray, np.ndarray]:
         """Origins and unit directions ``(nx * ny, 3)``, pixel ``(i, r)`` at ``i + r * nx``.
         Read-only arrays, made at the first call and kept."""
-        kept = self.__dict__.get("_rays")
-        if kept is None:
+
+        def make() -> tuple[np.ndarray, np.ndarray]:
             azimuths = 2 * np.pi * (np.arange(self.nx) + 0.5) / self.nx - np.pi
             elevations = np.pi * (np.arange(self.ny) + 0.5) / self.ny - np.pi / 2
             directions = _directions(*self._axes, azimuths, elevations)
-            directions.flags.writeable = False
-            kept = (np.broadcast_to(self.eye, directions.shape), directions)
-            object.__setattr__(self, "_rays", kept)  # (not a field of the frozen dataclass)
-        return kept
+            return np.broadcast_to(self.eye, directions.shape), directions
+
+        return _kept_rays(self, make)
 
 
 @dataclass(frozen=True)
@@ -145,14 +156,12 @@ class Lidar:
         """Origins, unit directions ``(rings * steps, 3)`` (beam ``a`` of ring ``e`` at
         ``a + e * steps``), and each beam's ring and azimuth (degrees). Read-only arrays,
         made at the first call and kept: every scan of the lidar casts the same beams."""
-        kept = self.__dict__.get("_rays")
-        if kept is None:
+
+        def make() -> tuple[np.ndarray, ...]:
             azimuths = np.arange(self.azimuth_steps) * (360.0 / self.azimuth_steps)
             directions = _directions(*self._axes, np.radians(azimuths), np.radians(self.elevations))
             ring = np.repeat(np.arange(len(self.elevations)), self.azimuth_steps)
             azimuth = np.tile(azimuths, len(self.elevations))
-            for a in (directions, ring, azimuth):
-                a.flags.writeable = False
-            kept = (np.broadcast_to(self.position, directions.shape), directions, ring, azimuth)
-            object.__setattr__(self, "_rays", kept)  # (not a field of the frozen dataclass)
-        return kept
+            return np.broadcast_to(self.position, directions.shape), directions, ring, azimuth
+
+        return _kept_rays(self, make)
