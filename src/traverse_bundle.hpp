@@ -345,13 +345,16 @@ class BundleTracer {
         if (w1 < 0) return Rect{};
         const double u0 = axes_[1].low(extent[2][c]), u1 = axes_[1].high(extent[3][c]);
         const double v0 = axes_[2].low(extent[4][c]), v1 = axes_[2].high(extent[5][c]);
-        // u / w over the box lies between these quotients; 1e-12 covers their rounding.
-        const double s = 1e-12;
-        if (w0 > 0)
-            return Rect{std::min(u0 / w0, u0 / w1) - s, std::max(u1 / w0, u1 / w1) + s,
-                        std::min(v0 / w0, v0 / w1) - s, std::max(v1 / w0, v1 / w1) + s};
-        return Rect{u0 > 0 ? u0 / w1 - s : -HUGE_VAL, u1 < 0 ? u1 / w1 + s : HUGE_VAL, v0 > 0 ? v0 / w1 - s : -HUGE_VAL,
-                    v1 < 0 ? v1 / w1 + s : HUGE_VAL};
+        // u / w over the box lies between these quotients; 1e-12 covers their rounding
+        // (two, with the reciprocals: relative 2^-52, where the rays' projections lie, below 9).
+        const double s = 1e-12, r1 = 1 / w1;
+        if (w0 > 0) {
+            const double r0 = 1 / w0;
+            return Rect{std::min(u0 * r0, u0 * r1) - s, std::max(u1 * r0, u1 * r1) + s,
+                        std::min(v0 * r0, v0 * r1) - s, std::max(v1 * r0, v1 * r1) + s};
+        }
+        return Rect{u0 > 0 ? u0 * r1 - s : -HUGE_VAL, u1 < 0 ? u1 * r1 + s : HUGE_VAL, v0 > 0 ? v0 * r1 - s : -HUGE_VAL,
+                    v1 < 0 ? v1 * r1 + s : HUGE_VAL};
     }
 
     /// False, with the tile unfinished, once it has taken more than `budget` nodes and
