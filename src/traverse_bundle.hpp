@@ -456,18 +456,22 @@ class BundleTracer {
             const double span = std::fabs(a[1] - a[0]) + std::fabs(b[1] - b[0]) + std::fabs(a[2] - a[0]) + std::fabs(b[2] - b[0]);
             sense = std::fabs(area) > 1e-9 * span * span ? (area > 0 ? 1 : -1) : 0;
         }
-        [[nodiscard]] bool outside(double pa, double pb) const {
-            if (sense == 0) return false;
+        /// Lanes of the projections (pa, pb) that lie outside, four at a time.
+        [[nodiscard]] Mask4 outside(Double4 pa, Double4 pb) const {
+            Mask4 out = Mask4{};
+            if (sense == 0) return out;
+            const auto abs = [](Double4 x) { return x < 0 ? -x : x; };
             for (int u = 0; u < 3; ++u) {
                 const int v = u == 2 ? 0 : u + 1;
-                const double da = a[v] - a[u], db = b[v] - b[u], qa = pa - a[u], qb = pb - b[u];
-                const double edge = sense * (da * qb - db * qa);
+                const double da = a[v] - a[u], db = b[v] - b[u];
+                const Double4 qa = pa - a[u], qb = pb - b[u];
+                const Double4 edge = sense * (da * qb - db * qa);
                 // (the projections are good to about 1e-14 here, values below 9)
-                const double margin = 1e-9 * (std::fabs(da * qb) + std::fabs(db * qa)) +
-                                      1e-12 * (std::fabs(da) + std::fabs(db) + std::fabs(qa) + std::fabs(qb));
-                if (edge < -margin) return true;
+                const Double4 margin = 1e-9 * (abs(da * qb) + abs(db * qa)) +
+                                       1e-12 * (std::fabs(da) + std::fabs(db) + abs(qa) + abs(qb));
+                out |= edge < -margin;
             }
-            return false;
+            return out;
         }
     };
 
@@ -512,11 +516,13 @@ class BundleTracer {
                 Double4 a, b;
                 std::memcpy(&a, candidate_a_ + c0, sizeof a);
                 std::memcpy(&b, candidate_b_ + c0, sizeof b);
-                const Mask4 in = (a >= rect.a0) & (a <= rect.a1) & (b >= rect.b0) & (b <= rect.b1);
+                Mask4 in = (a >= rect.a0) & (a <= rect.a1) & (b >= rect.b0) & (b <= rect.b1);
+                if (!any(in)) continue;
+                in &= ~outline.outside(a, b);
                 const unsigned inside = unsigned(in[0] & 1) | unsigned(in[1] & 2) | unsigned(in[2] & 4) | unsigned(in[3] & 8);
                 for (unsigned m = inside; m; m &= m - 1) {
                     const int c = c0 + __builtin_ctz(m), j = candidates_[c];
-                    if (bound_[j] * w_[j] < nearest || outline.outside(candidate_a_[c], candidate_b_[c])) continue;
+                    if (bound_[j] * w_[j] < nearest) continue;
                     const double before = bound_[j];
                     test_triangle(kernel(j), scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
                     changed_[j] |= bound_[j] != before;
