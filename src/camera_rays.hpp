@@ -103,7 +103,7 @@ class CameraRays {
         out.tmax = tmax_ * up;
         for (int l = 0; l < 4; ++l) exponent[l] = -int(e[l]);
         const M common = (m >= 0x1p-500) & (m < 0x1p500);
-        return unsigned(common[0] & 1) | unsigned(common[1] & 2) | unsigned(common[2] & 4) | unsigned(common[3] & 8);
+        return lane_bits(common);
     }
 
     /// Square tiles of kTile x kTile pixels: neighbouring rays traverse the same nodes.

@@ -31,6 +31,14 @@ inline bool any(Mask4 m) {
     return (m[0] | m[1] | m[2] | m[3]) != 0;
 #endif
 }
+/// The lanes of m that are set, as bits 0 to 3.
+inline unsigned lane_bits(Mask4 m) {
+#if defined(__AVX__)
+    return unsigned(_mm256_movemask_pd(_mm256_castsi256_pd(__m256i(m))));
+#else
+    return unsigned(m[0] & 1) | unsigned(m[1] & 2) | unsigned(m[2] & 4) | unsigned(m[3] & 8);
+#endif
+}
 
 /// Axis-aligned box in single precision. Stored boxes are rounded outward, so a box
 /// always contains the double-precision triangles it bounds.

@@ -315,12 +315,24 @@ class BundleTracer {
         far_ = *std::max_element(block_far_, block_far_ + n_blocks_);
         far_limit_ = std::isinf(far_) ? HUGE_VALF : round_up(far_ + axes_[0].n_o + axes_[0].slack);
     }
-    /// After a ray of block b came closer (bounds only shrink: the bundle's far bound
-    /// changes only when b held it).
-    void update_block(int b) {
-        const double before = block_far_[b];
-        block_far_[b] = search_far(b);
-        if (before >= far_) set_far();
+    /// After rays of a leaf's candidates came closer (`changed_`): their blocks' far bounds,
+    /// each once, then the bundle's, when one of those blocks held it (bounds only shrink).
+    void update_blocks(int n) {
+        int blocks[kMaxRays], n_blocks = 0;
+        for (int c = 0; c < n; ++c) {
+            const int j = candidates_[c];
+            if (!changed_[j]) continue;
+            changed_[j] = false;
+            if (!block_changed_[block_of_[j]]) block_changed_[blocks[n_blocks++] = block_of_[j]] = true;
+        }
+        bool held = false;
+        for (int i = 0; i < n_blocks; ++i) {
+            const int b = blocks[i];
+            block_changed_[b] = false;
+            held |= block_far_[b] >= far_;
+            block_far_[b] = search_far(b);
+        }
+        if (held) set_far();
     }
 
     /// Whether some block's rays may meet a box projecting into `rect` at distances along
@@ -425,13 +437,27 @@ class BundleTracer {
     /// (projecting into `rect`, from `nearest` along c on).
     void leaf(uint32_t first, uint32_t count, const Rect& rect, double nearest) {
         int n = 0;  // the rays to test (then the points are asked for: many leaves have none)
+        const Double4 a0 = Double4{} + rect.a0, a1 = Double4{} + rect.a1, b0 = Double4{} + rect.b0,
+                      b1 = Double4{} + rect.b1, near = Double4{} + nearest;
         for (int r = 0; r < rows_; ++r) {
             if (!rows_rect_[r].meets(rect)) continue;
             for (int b = r * blocks_per_row(); b < (r + 1) * blocks_per_row(); ++b) {
                 if (block_far_[b] < nearest || !blocks_[b].meets(rect)) continue;
-                for (int j = block_first_[b]; j < block_first_[b + 1]; ++j)
-                    if (rect.holds(a_[j], b_[j]) && bound_[j] * w_[j] >= nearest)
-                        candidate_a_[n] = a_[j], candidate_b_[n] = b_[j], candidates_[n++] = j;
+                // the block's rays (at most kBlock, in a row) four at a time
+                const int first_ray = block_first_[b];
+                unsigned in = 0;
+                for (int h = 0; h < kBlock; h += 4) {
+                    Double4 a, bb, bound, w;
+                    std::memcpy(&a, a_ + first_ray + h, sizeof a);
+                    std::memcpy(&bb, b_ + first_ray + h, sizeof bb);
+                    std::memcpy(&bound, bound_ + first_ray + h, sizeof bound);
+                    std::memcpy(&w, w_ + first_ray + h, sizeof w);
+                    in |= lane_bits((a >= a0) & (a <= a1) & (bb >= b0) & (bb <= b1) & (bound * w >= near)) << h;
+                }
+                for (in &= (1u << (block_first_[b + 1] - first_ray)) - 1; in; in &= in - 1) {
+                    const int j = first_ray + __builtin_ctz(in);
+                    candidate_a_[n] = a_[j], candidate_b_[n] = b_[j], candidates_[n++] = j;
+                }
             }
         }
         if (n == 0) return;
@@ -441,8 +467,7 @@ class BundleTracer {
             by_triangle(first, count, n);
         else
             by_ray(first, count, n);
-        for (int c = 0; c < n; ++c)
-            if (changed_[candidates_[c]]) changed_[candidates_[c]] = false, update_block(block_of_[candidates_[c]]);
+        update_blocks(n);
     }
 
     /// A triangle's projection (its points' (a, b), all in front): a ray whose projection
@@ -519,8 +544,7 @@ class BundleTracer {
                 Mask4 in = (a >= rect.a0) & (a <= rect.a1) & (b >= rect.b0) & (b <= rect.b1);
                 if (!any(in)) continue;
                 in &= ~outline.outside(a, b);
-                const unsigned inside = unsigned(in[0] & 1) | unsigned(in[1] & 2) | unsigned(in[2] & 4) | unsigned(in[3] & 8);
-                for (unsigned m = inside; m; m &= m - 1) {
+                for (unsigned m = lane_bits(in); m; m &= m - 1) {
                     const int c = c0 + __builtin_ctz(m), j = candidates_[c];
                     if (bound_[j] * w_[j] < nearest) continue;
                     const double before = bound_[j];
@@ -569,10 +593,12 @@ class BundleTracer {
     std::optional<Kernel> kernel_[kMaxRays];
     std::optional<TriangleFilter> filter_[kMaxRays];
     bool changed_[kMaxRays];  ///< whether ray j's bound came closer in the leaf
+    bool block_changed_[kMaxRays] = {};  ///< (update_blocks' own)
     int candidates_[kMaxRays];  ///< the rays a leaf is tested on, and their projections
     double candidate_a_[kMaxRays + 3], candidate_b_[kMaxRays + 3];
     Hit<Real> hit_[kMaxRays];
-    double bound_[kMaxRays], w_[kMaxRays], a_[kMaxRays], b_[kMaxRays];
+    // (kBlock more: a block's rays are read kBlock at a time)
+    double bound_[kMaxRays + kBlock], w_[kMaxRays + kBlock], a_[kMaxRays + kBlock], b_[kMaxRays + kBlock];
     std::vector<RowHistory> history_;  ///< by row of tiles
     std::vector<std::size_t> which_;   ///< a tile's rays, for trace_rays_interleaved
     uint32_t hit_prims_[kMaxRays];     ///< the triangles a tile's rays hit
