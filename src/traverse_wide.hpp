@@ -235,6 +235,23 @@ class WideSearch {
         // entered lanes), so the nearest is popped first. Every hit wanted, any order does;
         // any hit, too: a search stops at the first found, wherever it lies, and sorting
         // cost more than finding a nearer one first saved.
+#if defined(__AVX2__)
+        if constexpr (kPolicy == HitPolicy::closest) {
+            // Each entered lane's place counted, not searched for (no branch on the
+            // distances): the entered lanes farther than it, and those as far before it.
+            const __m256 keys = _mm256_blendv_ps(_mm256_set1_ps(-HUGE_VALF), _mm256_load_ps(enter), lane_mask(mask));
+            const std::size_t base = top_;
+            top_ += std::size_t(__builtin_popcount(mask));
+            for (; mask; mask &= mask - 1) {
+                const int c = __builtin_ctz(mask);
+                const __m256 key = _mm256_set1_ps(enter[c]);
+                const unsigned farther = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_GT_OQ))) |
+                                         (unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_EQ_OQ))) & ((1u << c) - 1));
+                push(node, c, enter[c], base + std::size_t(__builtin_popcount(farther)));
+            }
+            return pop();
+        }
+#endif
         int order[WideNode::kWidth], n = 0;
         for (; mask; mask &= mask - 1) {
             const int c = __builtin_ctz(mask);
@@ -243,14 +260,7 @@ class WideSearch {
                 for (; at > 0 && enter[order[at - 1]] < enter[c]; --at) order[at] = order[at - 1];
             order[at] = c;
         }
-        for (int i = 0; i < n; ++i) {
-            const int c = order[i];
-            if (node.count[c] == 0) {  // the whole node: its bounds span its four cache lines
-                const char* next = reinterpret_cast<const char*>(&scene_.wide[node.child[c]]);
-                for (int line = 0; line < 4; ++line) __builtin_prefetch(next + 64 * line);
-            }
-            stack_[top_++] = {node.child[c], node.count[c], enter[c]};
-        }
+        for (int i = 0; i < n; ++i) push(node, order[i], enter[order[i]], top_++);
         return pop();
     }
 
@@ -259,6 +269,22 @@ class WideSearch {
     [[nodiscard]] unsigned nodes() const { return nodes_; }
 
    private:
+    /// Puts lane c of `node` at stack place `at`; a node child is asked for from memory.
+    [[gnu::always_inline]] void push(const WideNode& node, int c, float enter, std::size_t at) {
+        if (node.count[c] == 0) {  // the whole node: its bounds span its four cache lines
+            const char* next = reinterpret_cast<const char*>(&scene_.wide[node.child[c]]);
+            for (int line = 0; line < 4; ++line) __builtin_prefetch(next + 64 * line);
+        }
+        stack_[at] = {node.child[c], node.count[c], enter};
+    }
+#if defined(__AVX2__)
+    /// The lanes whose bits are set in `bits`, as all-ones lanes.
+    static __m256 lane_mask(unsigned bits) {
+        const __m256i bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        return _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(int(bits)), bit), bit));
+    }
+#endif
+
     /// Pops the next node the ray may meet before the closest hit so far; the leaves popped
     /// on the way are tested, or, staged, the first of them is asked for from memory and
     /// ends the step (the next two steps fetch its points and test it). False when there is
