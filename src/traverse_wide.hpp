@@ -231,28 +231,36 @@ class WideSearch {
         ++nodes_;
         alignas(32) float enter[WideNode::kWidth];
         unsigned mask = lanes_.test(node, enter);
-        // Push the entered lanes farthest first (an insertion sort: most nodes have few
-        // entered lanes), so the nearest is popped first. Every hit wanted, any order does;
-        // any hit, too: a search stops at the first found, wherever it lies, and sorting
-        // cost more than finding a nearer one first saved.
+        // The entered lanes go on the stack farthest first, so the nearest is popped
+        // first. Every hit wanted, any order does; any hit, too: a search stops at the
+        // first found, wherever it lies, and sorting cost more than finding a nearer one
+        // first saved.
 #if defined(__AVX2__)
         if constexpr (kPolicy == HitPolicy::closest) {
-            // Each entered lane's place counted, not searched for (no branch on the
-            // distances): the entered lanes farther than it, and those as far before it.
+            // Each entered lane's place counted, not searched for: the entered lanes
+            // farther than it, and those as far before it (an insertion sort's compares on
+            // the distances defeated the branch predictor). The nearest is gone on to at
+            // once (its slot, just above the stack's top, is written but not kept).
+            if (!mask) return pop();
             const __m256 keys = _mm256_blendv_ps(_mm256_set1_ps(-HUGE_VALF), _mm256_load_ps(enter), lane_mask(mask));
             const std::size_t base = top_;
-            top_ += std::size_t(__builtin_popcount(mask));
+            const int last = __builtin_popcount(mask) - 1;
+            top_ += std::size_t(last);
+            int nearest = 0;
             for (; mask; mask &= mask - 1) {
                 const int c = __builtin_ctz(mask);
                 const __m256 key = _mm256_set1_ps(enter[c]);
                 const unsigned farther = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_GT_OQ))) |
                                          (unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_EQ_OQ))) & ((1u << c) - 1));
-                push(node, c, enter[c], base + std::size_t(__builtin_popcount(farther)));
+                const int place = __builtin_popcount(farther);
+                push(node, c, enter[c], base + std::size_t(place));
+                nearest = place == last ? c : nearest;
             }
-            return pop();
+            const After after = take({node.child[nearest], node.count[nearest], enter[nearest]});
+            return after == After::pop ? pop() : after == After::step;
         }
 #endif
-        int order[WideNode::kWidth], n = 0;
+        int order[WideNode::kWidth], n = 0;  // (an insertion sort: most nodes have few entered lanes)
         for (; mask; mask &= mask - 1) {
             const int c = __builtin_ctz(mask);
             int at = n++;
@@ -298,20 +306,32 @@ class WideSearch {
                 if (top_ == 0) return false;
                 --top_;
             } while (lanes_.beyond(stack_[top_].enter));
-            const Pending& next = stack_[top_];
-            if (next.count == 0) {
-                node_ = next.child;
-                return true;
-            }
-            if constexpr (kStaged) {
-                leaf_ = next;
-                leaf_stage_ = 1;
-                __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(next.child));
-                __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(next.child + next.count) - 1);
-                return true;
-            } else if (leaf(next.child, next.count)) {
-                return false;
-            }
+            const After after = take(stack_[top_]);
+            if (after != After::pop) return after == After::step;
+        }
+    }
+
+    struct Pending {
+        uint32_t child, count;
+        float enter;
+    };
+
+    /// What a search does after going on to a node or leaf: its next step (a node to test,
+    /// or a staged leaf), pop another, or stop (any hit found).
+    enum class After { step, pop, stop };
+    After take(const Pending& next) {
+        if (next.count == 0) {
+            node_ = next.child;
+            return After::step;
+        }
+        if constexpr (kStaged) {
+            leaf_ = next;
+            leaf_stage_ = 1;
+            __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(next.child));
+            __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(next.child + next.count) - 1);
+            return After::step;
+        } else {
+            return leaf(next.child, next.count) ? After::stop : After::pop;
         }
     }
 
@@ -346,10 +366,6 @@ class WideSearch {
         return false;
     }
 
-    struct Pending {
-        uint32_t child, count;
-        float enter;
-    };
     const Scene& scene_;
     const Ray& ray_;
     const CastContext& context_;
