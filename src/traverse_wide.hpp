@@ -235,41 +235,42 @@ class WideSearch {
         // first. Every hit wanted, any order does; any hit, too: a search stops at the
         // first found, wherever it lies, and sorting cost more than finding a nearer one
         // first saved.
+        // Each entered lane's place is counted, not searched for: the entered lanes
+        // farther than it, and those as far before it (an insertion sort's compares on the
+        // distances defeated the branch predictor); without sorting, those before it. The
+        // last placed (the nearest) is gone on to at once: its slot, just above the stack's
+        // top, is written but not kept.
+        if (!mask) return pop();
 #if defined(__AVX2__)
-        if constexpr (kPolicy == HitPolicy::closest) {
-            // Each entered lane's place counted, not searched for: the entered lanes
-            // farther than it, and those as far before it (an insertion sort's compares on
-            // the distances defeated the branch predictor). The nearest is gone on to at
-            // once (its slot, just above the stack's top, is written but not kept).
-            if (!mask) return pop();
-            const __m256 keys = _mm256_blendv_ps(_mm256_set1_ps(-HUGE_VALF), _mm256_load_ps(enter), lane_mask(mask));
-            const std::size_t base = top_;
-            const int last = __builtin_popcount(mask) - 1;
-            top_ += std::size_t(last);
-            int nearest = 0;
-            for (; mask; mask &= mask - 1) {
-                const int c = __builtin_ctz(mask);
-                const __m256 key = _mm256_set1_ps(enter[c]);
-                const unsigned farther = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_GT_OQ))) |
-                                         (unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_EQ_OQ))) & ((1u << c) - 1));
-                const int place = __builtin_popcount(farther);
-                push(node, c, enter[c], base + std::size_t(place));
-                nearest = place == last ? c : nearest;
-            }
-            const After after = take({node.child[nearest], node.count[nearest], enter[nearest]});
-            return after == After::pop ? pop() : after == After::step;
-        }
+        const __m256 keys = _mm256_blendv_ps(_mm256_set1_ps(-HUGE_VALF), _mm256_load_ps(enter), lane_mask(mask));
 #endif
-        int order[WideNode::kWidth], n = 0;  // (an insertion sort: most nodes have few entered lanes)
-        for (; mask; mask &= mask - 1) {
-            const int c = __builtin_ctz(mask);
-            int at = n++;
-            if constexpr (kPolicy == HitPolicy::closest)
-                for (; at > 0 && enter[order[at - 1]] < enter[c]; --at) order[at] = order[at - 1];
-            order[at] = c;
+        const std::size_t base = top_;
+        const int last = __builtin_popcount(mask) - 1;
+        top_ += std::size_t(last);
+        int nearest = 0;
+        for (unsigned rest = mask; rest; rest &= rest - 1) {
+            const int c = __builtin_ctz(rest);
+            const unsigned before = mask & ((1u << c) - 1);
+            unsigned farther = before;
+            if constexpr (kPolicy == HitPolicy::closest) {
+#if defined(__AVX2__)
+                const __m256 key = _mm256_set1_ps(enter[c]);
+                farther = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_GT_OQ))) |
+                          (unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_EQ_OQ))) & before);
+#else
+                farther = 0;
+                for (unsigned m = mask; m; m &= m - 1) {
+                    const int d = __builtin_ctz(m);
+                    farther |= unsigned(enter[d] > enter[c] || (enter[d] == enter[c] && d < c)) << d;
+                }
+#endif
+            }
+            const int place = __builtin_popcount(farther);
+            push(node, c, enter[c], base + std::size_t(place));
+            nearest = place == last ? c : nearest;
         }
-        for (int i = 0; i < n; ++i) push(node, order[i], enter[order[i]], top_++);
-        return pop();
+        const After after = take({node.child[nearest], node.count[nearest], enter[nearest]});
+        return after == After::pop ? pop() : after == After::step;
     }
 
     [[nodiscard]] const Hit<Real>& hit() const { return hit_; }
