@@ -118,11 +118,14 @@ class BundleTracer {
     void trace(std::size_t tile, const Store& store) {
         const SweepRays::TileRays t = rays_.tile_rays(tile);
         rows_ = int(t.r1 - t.r0 + 1), cols_ = int(t.c1 - t.c0 + 1), n_ = rows_ * cols_;
-        for (int j = 0; j < n_; ++j) {
-            index_[j] = std::size_t(t.c0 + j % cols_ + (t.r0 + j / cols_) * rays_.cols());
-            ray_[j] = rays_.ray(index_[j]);
-            hit_[j] = Hit<Real>{};
-            bound_[j] = ray_[j].tmax;
+        for (int r = 0, j = 0; r < rows_; ++r) {  // (row by row: no division per ray)
+            const std::size_t row_start = std::size_t(t.c0 + (t.r0 + r) * rays_.cols());
+            for (int c = 0; c < cols_; ++c, ++j) {
+                index_[j] = row_start + std::size_t(c);
+                ray_[j] = rays_.ray(index_[j]);
+                hit_[j] = Hit<Real>{};
+                bound_[j] = ray_[j].tmax;
+            }
         }
         if (scene_.wide.empty()) {
             for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], hit_[j]);
