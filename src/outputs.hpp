@@ -2,10 +2,13 @@
 // the worker that found it, straight into caller-owned arrays (misses in the same pass).
 #pragma once
 
+#include <immintrin.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <type_traits>
 #include <utility>
@@ -66,21 +69,25 @@ class OutputWriter {
     static constexpr Real kNaN = std::numeric_limits<Real>::quiet_NaN();
 
    public:
-    OutputWriter(const Scene& scene, const Outputs<Real>& out) : scene_(scene), out_(out) {
+    /// `streaming`: rays are stored in the outputs' order, row by row (camera tiles), so the
+    /// eight-byte outputs go out with streaming stores (whole lines, no read of what they
+    /// replace); the writer's thread must then call fence() before its outputs are read.
+    OutputWriter(const Scene& scene, const Outputs<Real>& out, bool streaming = false)
+        : scene_(scene), out_(out), streaming_(streaming) {
         for (const Field& f : out.fields)
             if (f.per_point)
-                point_fields_.push_back({&f, interpolator(f)});
+                point_fields_.push_back({&f, streaming ? interpolator<true>(f) : interpolator<false>(f)});
             else
-                cell_fields_.push_back({&f, copier(f)});
+                cell_fields_.push_back({&f, streaming ? copier<true>(f) : copier<false>(f)});
     }
 
     /// Ray k's closest hit (or a miss when none is found); `ray` is read on hits only.
     void operator()(std::size_t k, const Ray& ray, const Hit<Real>& hit) const {
         if (!hit.found()) return misses<1>(k);
         const uint32_t input = by_triangle(k, hit.prim);
-        if (out_.depth) out_.depth[k] = static_cast<Real>(ray.output(hit.t));
+        if (out_.depth) put(out_.depth + k, static_cast<Real>(ray.output(hit.t)));
         if (out_.barycentric)
-            for (int c = 0; c < 3; ++c) out_.barycentric[3 * k + c] = hit.b[c];
+            for (int c = 0; c < 3; ++c) put(out_.barycentric + 3 * k + c, static_cast<Real>(hit.b[c]));
         if (out_.position) {
             const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(hit.prim);
             for (int a = 0; a < 3; ++a) {
@@ -122,23 +129,61 @@ class OutputWriter {
     template <std::size_t kCount = 0>
     void misses(std::size_t k, std::size_t n = kCount) const {
         if constexpr (kCount != 0) n = kCount;
-        if (out_.triangle_id) std::fill_n(out_.triangle_id + k, n, int64_t(-1));
-        if (out_.cell_id) std::fill_n(out_.cell_id + k, n, int64_t(-1));
+        if (out_.triangle_id) put_n(out_.triangle_id + k, n, int64_t(-1));
+        if (out_.cell_id) put_n(out_.cell_id + k, n, int64_t(-1));
         if (out_.composite_index) std::fill_n(out_.composite_index + k, n, int64_t(-1));
         if (out_.valid) std::fill_n(out_.valid + k, n, uint8_t(0));
-        if (out_.depth) std::fill_n(out_.depth + k, n, kNaN);
-        if (out_.barycentric) std::fill_n(out_.barycentric + 3 * k, 3 * n, kNaN);
+        if (out_.depth) put_n(out_.depth + k, n, kNaN);
+        if (out_.barycentric) put_n(out_.barycentric + 3 * k, 3 * n, kNaN);
         if (out_.position) std::fill_n(out_.position + 3 * k, 3 * n, kNaN);
         if (out_.normal) std::fill_n(out_.normal + 3 * k, 3 * n, kNaN);
-        for (const Field& f : out_.fields) with_type(f.dtype, [&](auto zero) { fill_missing(f, zero, k, n); });
+        for (const Field& f : out_.fields)
+            with_type(f.dtype, [&](auto zero) {
+                using T = decltype(zero);
+                const T missing = std::is_floating_point_v<T> ? std::numeric_limits<T>::quiet_NaN() : T(0);
+                put_n(static_cast<T*>(f.out) + k * f.components, n * f.components, missing);
+            });
+    }
+
+    /// Makes this thread's streaming stores visible to others (their reads after it).
+    void fence() const {
+        if (streaming_) _mm_sfence();
     }
 
    private:
+    /// Stores v at p; with kStream, a value of four or eight bytes by a streaming store (see
+    /// the constructor). A tile's row writes each output's lines whole, one after another;
+    /// written through the cache, an image's outputs (the default arrays of a 1024 x 1024
+    /// cast are 50 to 80 MB, beyond the caches) cost a read of every line first.
+    template <bool kStream, class T>
+    [[gnu::always_inline]] static void put_as(T* p, T v) {
+        if constexpr (kStream && sizeof(T) == 8) {
+            long long bits;
+            std::memcpy(&bits, &v, sizeof bits);
+            _mm_stream_si64(reinterpret_cast<long long*>(p), bits);
+        } else if constexpr (kStream && sizeof(T) == 4) {
+            int bits;
+            std::memcpy(&bits, &v, sizeof bits);
+            _mm_stream_si32(reinterpret_cast<int*>(p), bits);
+        } else {
+            *p = v;
+        }
+    }
+    template <class T>
+    [[gnu::always_inline]] void put(T* p, T v) const {
+        streaming_ ? put_as<true>(p, v) : put_as<false>(p, v);
+    }
+    template <class T>
+    void put_n(T* p, std::size_t n, T v) const {
+        if (!streaming_) return void(std::fill_n(p, n, v));
+        for (std::size_t i = 0; i < n; ++i) put_as<true>(p + i, v);
+    }
+
     /// Writes what triangle `prim` alone decides for ray k; returns its input index.
     uint32_t by_triangle(std::size_t k, uint32_t prim) const {
         const uint32_t input = scene_.prim_ids[prim];
-        if (out_.triangle_id) out_.triangle_id[k] = int64_t(input);
-        if (out_.cell_id) out_.cell_id[k] = out_.cells_are_triangles ? int64_t(input) : out_.cell_ids[input];
+        if (out_.triangle_id) put(out_.triangle_id + k, int64_t(input));
+        if (out_.cell_id) put(out_.cell_id + k, out_.cells_are_triangles ? int64_t(input) : out_.cell_ids[input]);
         if (out_.composite_index) out_.composite_index[k] = out_.composite_ids[input];
         if (out_.valid) out_.valid[k] = 1;
         if (out_.normal) unit_normal(prim, out_.normal + 3 * k);
@@ -171,30 +216,29 @@ class OutputWriter {
         }
     }
 
-    template <class T>
-    static void fill_missing(const Field& f, T, std::size_t k, std::size_t n) {
-        const T missing = std::is_floating_point_v<T> ? std::numeric_limits<T>::quiet_NaN() : T(0);
-        std::fill_n(static_cast<T*>(f.out) + k * f.components, n * f.components, missing);
-    }
-
     /// Copies row `row` of cell field f to ray k's output row.
     using Copy = void (*)(const Field& f, std::size_t row, std::size_t k);
 
     /// The copy of field f's rows, made for its type and, for one or three components,
     /// their number (as interpolator).
+    template <bool kStream>
     static Copy copier(const Field& f) {
         Copy chosen = nullptr;
         with_type(f.dtype, [&](auto zero) {
             using T = decltype(zero);
-            chosen = f.components == 1 ? &copy_as<T, 1> : f.components == 3 ? &copy_as<T, 3> : &copy_as<T, 0>;
+            chosen = f.components == 1   ? &copy_as<kStream, T, 1>
+                     : f.components == 3 ? &copy_as<kStream, T, 3>
+                                         : &copy_as<kStream, T, 0>;
         });
         return chosen;
     }
 
-    template <class T, uint32_t kComponents>
+    template <bool kStream, class T, uint32_t kComponents>
     static void copy_as(const Field& f, std::size_t row, std::size_t k) {
         const uint32_t n = kComponents != 0 ? kComponents : f.components;
-        std::copy_n(static_cast<const T*>(f.values) + row * n, n, static_cast<T*>(f.out) + k * n);
+        const T* from = static_cast<const T*>(f.values) + row * n;
+        T* to = static_cast<T*>(f.out) + k * n;
+        for (uint32_t j = 0; j < n; ++j) put_as<kStream>(to + j, from[j]);
     }
 
     /// Writes point field f at ray k's hit on the triangle of input points `corners`, weights b.
@@ -203,19 +247,20 @@ class OutputWriter {
     /// The interpolation of field f, made for its type and, for one or three components,
     /// their number: chosen once per cast, not per hit (a terrain's two point arrays took
     /// longer to interpolate than their scattered rows took to load).
+    template <bool kStream>
     static Interpolate interpolator(const Field& f) {
         Interpolate chosen = nullptr;
         with_type(f.dtype, [&](auto zero) {
             using T = decltype(zero);
-            chosen = f.components == 1   ? &interpolate_as<T, 1>
-                     : f.components == 3 ? &interpolate_as<T, 3>
-                                         : &interpolate_as<T, 0>;
+            chosen = f.components == 1   ? &interpolate_as<kStream, T, 1>
+                     : f.components == 3 ? &interpolate_as<kStream, T, 3>
+                                         : &interpolate_as<kStream, T, 0>;
         });
         return chosen;
     }
 
     /// kComponents: the field's components, or 0 for any number.
-    template <class T, uint32_t kComponents>
+    template <bool kStream, class T, uint32_t kComponents>
     static void interpolate_as(const Field& f, std::size_t k, const uint32_t* corners, const Real b[3]) {
         const uint32_t n = kComponents != 0 ? kComponents : f.components;
         const T* values = static_cast<const T*>(f.values);
@@ -227,11 +272,12 @@ class OutputWriter {
             for (uint32_t j = 0; j < n; ++j) {
                 double v = 0;
                 for (int c = 0; c < 3; ++c) v += double(b[c]) * double(rows[c][j]);
-                out[j] = static_cast<T>(v);
+                put_as<kStream>(out + j, static_cast<T>(v));
             }
         } else {
             const int c = b[1] > b[0] ? (b[2] > b[1] ? 2 : 1) : (b[2] > b[0] ? 2 : 0);
-            std::copy_n(values + std::size_t(corners[c]) * n, n, out);
+            const T* row = values + std::size_t(corners[c]) * n;
+            for (uint32_t j = 0; j < n; ++j) put_as<kStream>(out + j, row[j]);
         }
     }
 
@@ -247,6 +293,7 @@ class OutputWriter {
 
     const Scene& scene_;
     const Outputs<Real>& out_;
+    bool streaming_;
     std::vector<std::pair<const Field*, Interpolate>> point_fields_;  ///< the point fields, each with its interpolation
     std::vector<std::pair<const Field*, Copy>> cell_fields_;         ///< the cell fields, each with its copy
 };

@@ -116,7 +116,14 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
     std::mutex mutex;
     std::condition_variable finished;
 
-    const OutputWriter<Real> store(scene, out);
+    // Camera rays go a tile at a time (traverse_tile.hpp), through the BVH or, on a flat
+    // scene, through the triangles binned to the tile (bin_triangles.hpp); such tiles store
+    // their pixels row by row, in the outputs' order: streaming stores serve them.
+    constexpr bool kTiles = std::is_same_v<Rays, CameraRays> && !kBruteForce;
+    bool camera_tiles = false;
+    if constexpr (kTiles)
+        camera_tiles = CameraCast::fits(rays.spec()) && CameraCast::fits(scene) && CameraCast::pays(scene, rays);
+    const OutputWriter<Real> store(scene, out, camera_tiles);
     auto tile_done = [&] {
         if (done.fetch_add(1) + 1 == n_tiles) {
             std::lock_guard<std::mutex> lock(mutex);
@@ -164,19 +171,15 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
             return double(nodes);
         });
     };
-    // Camera rays go a tile at a time (traverse_tile.hpp), through the BVH or, on a flat
-    // scene, through the triangles binned to the tile (bin_triangles.hpp).
     const unsigned n_workers = std::max(1u, std::min<unsigned>(threads, unsigned(std::max<std::size_t>(n_tiles, 1))));
-    constexpr bool kTiles = std::is_same_v<Rays, CameraRays> && !kBruteForce;
     std::optional<std::conditional_t<kTiles, CameraCast, int>> camera;
     if constexpr (kTiles) {
-        if (CameraCast::fits(rays.spec()) && CameraCast::fits(scene) && CameraCast::pays(scene, rays))
-            camera.emplace(scene, rays, n_workers);
+        if (camera_tiles) camera.emplace(scene, rays, n_workers);
     }
     // A sweep's tiles go as bundles (traverse_bundle.hpp) where the kernel's hits are exact
     // (its culling by projection takes a hit to be a point of the triangle).
     constexpr bool kBundles = std::is_same_v<Rays, SweepRays> && !kBruteForce && std::is_same_v<Kernel<Real>, Watertight<double>>;
-    auto work = [&](unsigned w) {
+    auto trace_tiles = [&](unsigned w) {
         if constexpr (kBundles) {
             if (!context.any_hit) {
                 auto tracer = std::make_unique<BundleTracer<Kernel, Real>>(scene, rays, context);
@@ -206,6 +209,10 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
             trace_rays(tile, by_ray);
             tile_done();
         }
+    };
+    const auto work = [&](unsigned w) {
+        trace_tiles(w);
+        store.fence();
     };
     if (poll && !poll(0, n_tiles)) return false;  // so even a cast too short for a second call can be stopped
     if (n_tiles <= 1) {  // (a thread started and joined would cost more than a small batch's rays)
