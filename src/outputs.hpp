@@ -61,6 +61,14 @@ struct Outputs {
         if (depth || barycentric || position) return true;
         return std::any_of(fields.begin(), fields.end(), [](const Field& f) { return f.per_point; });
     }
+    /// Bytes written per ray.
+    [[nodiscard]] std::size_t bytes_per_ray() const {
+        std::size_t bytes = (triangle_id != nullptr) + (cell_id != nullptr) + (composite_index != nullptr);
+        bytes = 8 * bytes + (valid != nullptr) + sizeof(Real) * ((depth != nullptr) + 3 * (barycentric != nullptr) +
+                                                                 3 * (position != nullptr) + 3 * (normal != nullptr));
+        for (const Field& f : fields) bytes += f.row_bytes;
+        return bytes;
+    }
 };
 
 /// Writes hits and misses into the outputs. Called by the workers for disjoint rays.

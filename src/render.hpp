@@ -118,12 +118,14 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
 
     // Camera rays go a tile at a time (traverse_tile.hpp), through the BVH or, on a flat
     // scene, through the triangles binned to the tile (bin_triangles.hpp); such tiles store
-    // their pixels row by row, in the outputs' order: streaming stores serve them.
+    // their pixels row by row, in the outputs' order: streaming stores serve them when the
+    // outputs outgrow the caches (smaller ones are best left there for what reads them next).
     constexpr bool kTiles = std::is_same_v<Rays, CameraRays> && !kBruteForce;
     bool camera_tiles = false;
     if constexpr (kTiles)
         camera_tiles = CameraCast::fits(rays.spec()) && CameraCast::fits(scene) && CameraCast::pays(scene, rays);
-    const OutputWriter<Real> store(scene, out, camera_tiles);
+    constexpr std::size_t kStreamedBytes = std::size_t(16) << 20;
+    const OutputWriter<Real> store(scene, out, camera_tiles && rays.size() * out.bytes_per_ray() >= kStreamedBytes);
     auto tile_done = [&] {
         if (done.fetch_add(1) + 1 == n_tiles) {
             std::lock_guard<std::mutex> lock(mutex);
