@@ -57,8 +57,9 @@ struct Outputs {
 
     /// Whether an output needs the hit's exact depth or weights (else a hit known by its
     /// triangle alone is enough: TileTracer's sure hits).
-    [[nodiscard]] bool needs_hit_point() const {
-        if (depth || barycentric || position) return true;
+    [[nodiscard]] bool needs_hit_point() const { return depth || barycentric || position || has_point_fields(); }
+    /// Whether the mesh's point arrays are interpolated.
+    [[nodiscard]] bool has_point_fields() const {
         return std::any_of(fields.begin(), fields.end(), [](const Field& f) { return f.per_point; });
     }
     /// Bytes written per ray.

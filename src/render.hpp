@@ -195,7 +195,8 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         if constexpr (kTiles) {
             if (camera) {
                 const std::vector<uint32_t> unknown = camera->prepare(w, n_workers, rays);
-                TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context, !out.needs_hit_point());
+                TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context, !out.needs_hit_point(),
+                                                out.has_point_fields());
                 for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
                     if (camera->bins && rays.tile_may_hit(tile))
                         tracer.trace_bin(tile, *camera->bins, unknown, store);

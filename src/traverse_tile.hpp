@@ -50,11 +50,13 @@ class TileTracer {
 
    public:
     /// `by_triangle`: the cast asks only for what the hit triangle decides, not the hit's
-    /// depth or weights (see test_pixel).
+    /// depth or weights (see test_pixel). `point_rows`: it interpolates the mesh's point
+    /// arrays (see test_pixel).
     TileTracer(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, const CastContext& context,
-               bool by_triangle)
+               bool by_triangle, bool point_rows)
         : scene_(scene), rays_(rays), projected_(projected), context_(context), map_(rays.pixel_map()),
-          sure_allowed_(kSureHits && std::is_same_v<Kernel, Watertight<double>>), by_triangle_(by_triangle) {
+          sure_allowed_(kSureHits && std::is_same_v<Kernel, Watertight<double>>), by_triangle_(by_triangle),
+          point_rows_(point_rows) {
         const int64_t n = kStride * kStride;
         ray_.resize(n);
         kernel_.resize(n);
@@ -509,6 +511,10 @@ class TileTracer {
                 sure_bits_[r] |= bit;
                 sure_[j] = i;
                 depth_bound_[j] = double(far);
+                if (point_rows_) {  // (the rows of its corners are found through these when stored)
+                    const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
+                    for (int k = 0; k < 3; ++k) __builtin_prefetch(scene_.point_ids.data() + tri[k]);
+                }
                 return true;
             }
 #endif
@@ -547,6 +553,7 @@ class TileTracer {
     uint64_t sure_bits_[kStride];  // per row, a bit for each pixel settled by a sure hit (not made)
     bool sure_allowed_;            // see test_pixel
     bool by_triangle_;             // whether the cast asks only for what the hit triangle decides
+    bool point_rows_;              // whether it interpolates the mesh's point arrays
 #if defined(__AVX2__)
     static constexpr bool kSureHits = true;
 #else
