@@ -79,8 +79,9 @@ class OutputWriter {
 
    public:
     /// `streaming`: rays are stored in the outputs' order, row by row (camera tiles), so the
-    /// eight-byte outputs go out with streaming stores (whole lines, no read of what they
-    /// replace); the writer's thread must then call fence() before its outputs are read.
+    /// four- and eight-byte outputs go out with streaming stores (whole lines, no read of
+    /// what they replace); each writing thread must then call fence() before the outputs are
+    /// read.
     OutputWriter(const Scene& scene, const Outputs<Real>& out, bool streaming = false)
         : scene_(scene), out_(out), streaming_(streaming) {
         for (const Field& f : out.fields)

@@ -231,15 +231,14 @@ class WideSearch {
         ++nodes_;
         alignas(32) float enter[WideNode::kWidth];
         unsigned mask = lanes_.test(node, enter);
-        // The entered lanes go on the stack farthest first, so the nearest is popped
-        // first. Every hit wanted, any order does; any hit, too: a search stops at the
-        // first found, wherever it lies, and sorting cost more than finding a nearer one
-        // first saved.
-        // Each entered lane's place is counted, not searched for: the entered lanes
-        // farther than it, and those as far before it (an insertion sort's compares on the
-        // distances defeated the branch predictor); without sorting, those before it. The
-        // last placed (the nearest) is gone on to at once: its slot, just above the stack's
-        // top, is written but not kept.
+        // The entered lanes go on the stack farthest first, so the nearest is popped first.
+        // Every hit wanted, any order does; any hit, too: a search stops at the first found,
+        // wherever it lies, and sorting cost more than finding a nearer one first saved.
+        // Each entered lane's place is counted, not searched for: the entered lanes farther
+        // than it, and those as far before it (an insertion sort's compares on the distances
+        // defeated the branch predictor); without sorting, those before it. The last placed
+        // (the nearest) is gone on to at once: its slot, just above the stack's top, is
+        // written but not kept.
         if (!mask) return pop();
 #if defined(__AVX2__)
         const __m256 keys = _mm256_blendv_ps(_mm256_set1_ps(-HUGE_VALF), _mm256_load_ps(enter), lane_mask(mask));
@@ -283,8 +282,9 @@ class WideSearch {
     /// without a branch: whether a lane is a leaf follows no pattern the predictor learns).
     [[gnu::always_inline]] void push(const WideNode& node, int c, float enter, std::size_t at) {
         const uint32_t child = node.child[c], count = node.count[c];
-        const uintptr_t as_node = reinterpret_cast<uintptr_t>(scene_.wide.data() + child);
-        const uintptr_t as_leaf = reinterpret_cast<uintptr_t>(scene_.triangles.data() + 3 * std::size_t(child));
+        // (addresses as integers: the one not chosen may lie outside its array)
+        const uintptr_t as_node = reinterpret_cast<uintptr_t>(scene_.wide.data()) + sizeof(WideNode) * child;
+        const uintptr_t as_leaf = reinterpret_cast<uintptr_t>(scene_.triangles.data()) + 3 * sizeof(uint32_t) * child;
         const char* next = reinterpret_cast<const char*>(count == 0 ? as_node : as_leaf);
         for (int line = 0; line < 4; ++line) __builtin_prefetch(next + 64 * line);
         stack_[at] = {child, count, enter};
