@@ -166,6 +166,27 @@ def test_small_images_of_large_scenes_go_ray_by_ray():
     assert scene.memory_bytes > built
 
 
+def test_large_images_stream_their_outputs():
+    """A cast whose outputs reach 16 MiB writes them with streaming stores, tile row by tile
+    row (src/outputs.hpp, src/render.hpp): the same values as the rays cast one by one, and
+    as each array cast alone (below that size, stored through the cache): point and cell
+    arrays of four- and eight-byte types, one and three components, and the others."""
+    mesh = bumpy_sphere(4)
+    mesh.point_data["height"] = mesh.points[:, 2].astype(np.float32)
+    mesh.point_data["xyz"] = mesh.points.astype(np.float64)
+    mesh.point_data["label"] = np.arange(mesh.n_points, dtype=np.int32)
+    mesh.cell_data["area"] = mesh.compute_cell_sizes()["Area"].astype(np.float64)
+    mesh.cell_data["index"] = np.arange(mesh.n_cells, dtype=np.int64)
+    scene = vrc.Scene(mesh)
+    cam = around(mesh, nx=800, ny=700)  # 560 k pixels: 22 MB of TriangleId, Depth and Barycentric
+    assert compare(scene, scene, cam) > 100_000
+    image = scene.cast(cam)
+    names = ["height", "xyz", "label", "area", "index", "CellId", "vtkValidPointMask", "TriangleId"]
+    for name in names:  # (the largest alone, xyz, is 13 MB)
+        np.testing.assert_array_equal(image[name], scene.cast(cam, arrays=[name])[name], err_msg=name)
+    assert np.isnan(image["xyz"][image["TriangleId"] < 0]).all()
+
+
 def test_one_triangle_in_a_large_frame():
     mesh = bumpy_sphere(0, scale=1e-3)
     cam = vrc.Camera((0, 0, 5), (0, 0, 0), (0, 1, 0), view_angle=30, nx=301, ny=203)
