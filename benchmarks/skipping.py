@@ -125,7 +125,7 @@ def main() -> None:
         "coherence of camera rays",
         "same rays one by one (intersect)",
         median_of(lambda: scene.intersect(o, d)),
-        "32x32 packets (cast)",
+        "tiles as packets (cast)",
         recast,
     )
 

@@ -112,9 +112,11 @@ class CameraRays {
     /// found is culled (at 2x2-pixel quads) and that two workers stay balanced. Alternated
     /// cast after cast (benchmarks/compare_builds.py), 2 threads, against 16x16 tiles of
     /// 8x8 packets: the frog contour at 1024x1024 takes 0.90x the time, a 330 k-triangle
-    /// bumpy sphere filling the frame 0.87x (64x64 tiles are no faster than 32x32, and
-    /// 1.06x at 256x256).
-    static constexpr int64_t kTile = 32;
+    /// bumpy sphere filling the frame 0.87x; 64x64 tiles against 32x32, 1024x1024 views of
+    /// the frog, the channels and the terrain: 0.93x to 0.95x (the terrain's framed view
+    /// with the default arrays 1.00x), 1.01x at 256x256, the flat scenes' casts 0.97x to
+    /// 1.00x; 16x16 tiles 1.07x to 1.13x.
+    static constexpr int64_t kTile = 64;
     [[nodiscard]] std::size_t n_tiles() const { return std::size_t(tiles_x() * ((c_.ny + kTile - 1) / kTile)); }
     template <class F>
     void for_each_in_tile(std::size_t tile, F&& f) const {
