@@ -109,13 +109,10 @@ class CameraRays {
     /// Square tiles of kTile x kTile pixels: neighbouring rays traverse the same nodes.
     /// Through a BVH a tile's rays go as one packet (traverse_tile.hpp). Large enough to
     /// share node tests among many rays, small enough that a node behind the hits already
-    /// found is culled (at 2x2-pixel quads) and that two workers stay balanced. Alternated
-    /// cast after cast (benchmarks/compare_builds.py), 2 threads, against 16x16 tiles of
-    /// 8x8 packets: the frog contour at 1024x1024 takes 0.90x the time, a 330 k-triangle
-    /// bumpy sphere filling the frame 0.87x; 64x64 tiles against 32x32, 1024x1024 views of
-    /// the frog, the channels and the terrain: 0.93x to 0.95x (the terrain's framed view
-    /// with the default arrays 1.00x), 1.01x at 256x256, the flat scenes' casts 0.97x to
-    /// 1.00x; 16x16 tiles 1.07x to 1.13x.
+    /// found is culled (at 2x2-pixel quads) and that two workers stay balanced: 64 was the
+    /// fastest of 16, 32 and 64 on 1024x1024 views of the benchmarks' scenes, and no slower
+    /// at 256x256 (benchmarks/compare_builds.py). (64 is also the most a row's bits hold:
+    /// TileTracer.)
     static constexpr int64_t kTile = 64;
     [[nodiscard]] std::size_t n_tiles() const { return std::size_t(tiles_x() * ((c_.ny + kTile - 1) / kTile)); }
     template <class F>

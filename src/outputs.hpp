@@ -229,18 +229,29 @@ class OutputWriter {
     /// Copies row `row` of cell field f to ray k's output row.
     using Copy = void (*)(const Field& f, std::size_t row, std::size_t k);
 
-    /// The copy of field f's rows, made for its type and, for one or three components,
-    /// their number (as interpolator).
-    template <bool kStream>
-    static Copy copier(const Field& f) {
-        Copy chosen = nullptr;
+    /// What make(T{}, components) returns for field f's element type T and, for one or three
+    /// components, their number as a compile-time constant (else 0: any number): the
+    /// function that copies or interpolates f, chosen once per cast, not per hit (a
+    /// terrain's two point arrays took longer to interpolate than their scattered rows took
+    /// to load).
+    template <class Make>
+    static auto made_for(const Field& f, Make&& make) {
+        using Constant0 = std::integral_constant<uint32_t, 0>;
+        decltype(make(int8_t(0), Constant0{})) chosen = nullptr;
         with_type(f.dtype, [&](auto zero) {
-            using T = decltype(zero);
-            chosen = f.components == 1   ? &copy_as<kStream, T, 1>
-                     : f.components == 3 ? &copy_as<kStream, T, 3>
-                                         : &copy_as<kStream, T, 0>;
+            chosen = f.components == 1   ? make(zero, std::integral_constant<uint32_t, 1>{})
+                     : f.components == 3 ? make(zero, std::integral_constant<uint32_t, 3>{})
+                                         : make(zero, Constant0{});
         });
         return chosen;
+    }
+
+    /// The copy of field f's rows (made_for).
+    template <bool kStream>
+    static Copy copier(const Field& f) {
+        return made_for(f, [](auto zero, auto n) -> Copy {
+            return &copy_as<kStream, decltype(zero), decltype(n)::value>;
+        });
     }
 
     template <bool kStream, class T, uint32_t kComponents>
@@ -254,19 +265,12 @@ class OutputWriter {
     /// Writes point field f at ray k's hit on the triangle of input points `corners`, weights b.
     using Interpolate = void (*)(const Field& f, std::size_t k, const uint32_t* corners, const Real b[3]);
 
-    /// The interpolation of field f, made for its type and, for one or three components,
-    /// their number: chosen once per cast, not per hit (a terrain's two point arrays took
-    /// longer to interpolate than their scattered rows took to load).
+    /// The interpolation of field f (made_for).
     template <bool kStream>
     static Interpolate interpolator(const Field& f) {
-        Interpolate chosen = nullptr;
-        with_type(f.dtype, [&](auto zero) {
-            using T = decltype(zero);
-            chosen = f.components == 1   ? &interpolate_as<kStream, T, 1>
-                     : f.components == 3 ? &interpolate_as<kStream, T, 3>
-                                         : &interpolate_as<kStream, T, 0>;
+        return made_for(f, [](auto zero, auto n) -> Interpolate {
+            return &interpolate_as<kStream, decltype(zero), decltype(n)::value>;
         });
-        return chosen;
     }
 
     /// kComponents: the field's components, or 0 for any number.

@@ -52,8 +52,9 @@ class SweepRays {
     struct TileRays {
         int64_t r0, r1, c0, c1;
     };
-    /// Rays per tile: a 64 x 2048 lidar's scan took 0.96x the time with 512 as with 256 (the
-    /// frog and the terrain), 1.08x with 128; 1,024 gained little more.
+    /// Rays per tile: enough that a node tested for a bundle serves many rays, few enough
+    /// that the bundle's rectangles stay tight (512 was the fastest of 128 to 1,024 for the
+    /// benchmark's lidar over the frog and the terrain).
     static constexpr int64_t kTileRays = 512;
     [[nodiscard]] std::size_t n_tiles() const { return std::size_t(tiles_x() * n_tile_rows()); }
     /// Tiles side by side (a lidar's: the same rings, neighbouring azimuths) form a row.

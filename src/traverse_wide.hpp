@@ -450,9 +450,8 @@ bool coherent(const Scene& scene, const Rays& rays, const std::vector<std::size_
 /// time waiting. The answers are trace_ray's; rays finish in any order. With HitPolicy::all
 /// each search in flight has a sink of its own among `sinks` (kInFlight of them), readied
 /// for ray k by `sink.start(k, ray)`; `store` then receives it too: `store(k, ray, hit,
-/// sink)` (nullptr without sinks). `nodes` as trace_ray's. Sixteen in flight: random rays
-/// through the frog took 0.95x the time of twelve's and 0.92x of eight's (as many as 24
-/// gained nothing more).
+/// sink)` (nullptr without sinks). `nodes` as trace_ray's. Sixteen in flight: enough to
+/// keep the memory busy for random rays through the frog (fewer were slower, more no faster).
 constexpr int kInFlight = 16;
 template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Rays, class Store, class Sink = NoSink>
 void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vector<std::size_t>& which,
