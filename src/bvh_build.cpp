@@ -1015,7 +1015,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     Builder builder(refs, scene.nodes, static_cast<int>(std::max(1u, threads)));
     builder.build(0, 0, static_cast<uint32_t>(n_triangles), 0);
     scene.nodes.resize(builder.next_node.load());
-    scene.nodes.shrink_to_fit();
+    shrink_huge(scene.nodes);
 
     scene.prim_ids.resize(n_triangles);
     scene.triangles.resize(3 * n_triangles);

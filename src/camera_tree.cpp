@@ -54,10 +54,11 @@ void build_camera_tree(Scene& scene) {
     if (scene.nodes.empty()) return;
     tree.nodes.resize(1);
     place(scene.nodes, runs(scene.nodes), 0, 0, tree.nodes);
-    tree.nodes.shrink_to_fit();
+    shrink_huge(tree.nodes);
 
     std::vector<uint32_t>& list = tree.leaf_points;
     std::vector<uint32_t> listed_by(scene.points.size() / 3, UINT32_MAX);  // the last leaf to list each point
+    reserve_huge(tree.leaf_offsets, tree.nodes.size() + 1);
     tree.leaf_offsets.resize(tree.nodes.size() + 1);
     reserve_huge(list, scene.points.size() / 3 * 2);
     for (uint32_t i = 0; i < tree.nodes.size(); ++i) {
@@ -67,7 +68,7 @@ void build_camera_tree(Scene& scene) {
             if (listed_by[*p] != i) listed_by[*p] = i, list.push_back(*p);
     }
     tree.leaf_offsets.back() = uint32_t(list.size());
-    list.shrink_to_fit();
+    shrink_huge(list);
 }
 
 }  // namespace vrc

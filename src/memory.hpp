@@ -35,6 +35,17 @@ void reserve_huge(std::vector<T>& v, std::size_t n) {
     advise_huge(v.data(), n * sizeof(T));
 }
 
+/// Trims v's capacity to its size (as shrink_to_fit, which takes new memory without
+/// advice), in huge pages where large: a scene's arrays are read at random, and with 4 KiB
+/// pages most reads of a large scene also missed the TLB.
+template <class T>
+void shrink_huge(std::vector<T>& v) {
+    std::vector<T> fitted;
+    reserve_huge(fitted, v.size());
+    fitted.assign(v.begin(), v.end());
+    v.swap(fitted);
+}
+
 /// Blocks of bytes, one per cast running at a time (casts may run concurrently from
 /// several Python threads: the GIL is released).
 class ScratchPool {

@@ -43,6 +43,7 @@ void order_points(Scene& scene, const double* points, std::size_t n_points) {
     std::vector<double>().swap(scene.points);
     reserve_huge(scene.points, 3 * std::size_t(n_used));
     scene.points.resize(3 * std::size_t(n_used));
+    reserve_huge(scene.point_ids, n_used);
     scene.point_ids.resize(n_used);
     for (std::size_t p = 0; p < n_points; ++p)
         if (index[p] != kUnused) {

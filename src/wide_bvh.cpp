@@ -81,7 +81,7 @@ std::vector<WideNode> collapse_to_wide(const Scene& scene) {
             node.count[c] = c == 0 ? root.count : 0;
         }
     }
-    wide.shrink_to_fit();
+    shrink_huge(wide);
     return wide;
 }
 
