@@ -77,7 +77,7 @@ struct Scene {
     [[nodiscard]] uint32_t input_point(uint32_t i, int c) const { return point_ids[triangles[3 * std::size_t(i) + c]]; }
     /// Asks the cache for triangle i's points (leaf order), ahead of a kernel reading them.
     void prefetch_points(uint32_t i) const {
-        for (int k = 0; k < 3; ++k) __builtin_prefetch(point(triangles[3 * std::size_t(i) + k]));
+        for (int k = 0; k < 3; ++k) prefetch_line(point(triangles[3 * std::size_t(i) + k]));
     }
     /// Bytes single rays read: the wide nodes, the triangles and their points.
     [[nodiscard]] std::size_t ray_bytes() const {

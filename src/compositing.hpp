@@ -19,6 +19,8 @@
 #include <type_traits>
 #include <vector>
 
+#include "memory.hpp"
+
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -110,7 +112,7 @@ void copy_rows(std::size_t width, const uint8_t* source, uint8_t* target, std::s
         for (std::size_t k = 0; k < n; ++k) {
             if (k + kRowsAhead < n) {
                 if (fetch & kFetchTarget) __builtin_prefetch(target + to(k + kRowsAhead) * w, 1);
-                if (fetch & kFetchSource) __builtin_prefetch(source + from(k + kRowsAhead) * w);
+                if (fetch & kFetchSource) prefetch_line(source + from(k + kRowsAhead) * w);
             }
             std::memcpy(target + to(k) * w, source + from(k) * w, w);
         }
@@ -171,10 +173,10 @@ void send_hits(const Hits<Depth>& hits, const std::vector<Region>& regions, cons
         for (std::size_t k = 0; k < n; ++k) {
             // (in two stages: a hit's triangle and depth, then, once they are in, its key)
             if (k + 2 * kRowsAhead < n) {
-                __builtin_prefetch(hits.triangle + pixels[k + 2 * kRowsAhead]);
-                __builtin_prefetch(hits.depth + pixels[k + 2 * kRowsAhead]);
+                prefetch_line(hits.triangle + pixels[k + 2 * kRowsAhead]);
+                prefetch_line(hits.depth + pixels[k + 2 * kRowsAhead]);
             }
-            if (k + kRowsAhead < n) __builtin_prefetch(hits.keys + hits.triangle[pixels[k + kRowsAhead]]);
+            if (k + kRowsAhead < n) prefetch_line(hits.keys + hits.triangle[pixels[k + kRowsAhead]]);
             regions[r].find(pixels[k], place);
             const HitRecord record{uint32_t(place), double(hits.depth[pixels[k]]), hits.key(pixels[k])};
             std::memcpy(records + k * sizeof(HitRecord), &record, sizeof(HitRecord));
@@ -279,8 +281,8 @@ void receive_hits(const uint8_t* messages, const int64_t* bytes, std::size_t sen
             if (own && s.next + kRowsAhead < s.n) {  // (own's rows at the places ahead: a cache miss each)
                 uint32_t ahead;
                 std::memcpy(&ahead, s.message + (s.next + kRowsAhead) * sizeof(HitRecord), sizeof ahead);
-                __builtin_prefetch(own->hit + ahead);
-                __builtin_prefetch(own->depth + ahead);
+                prefetch_line(own->hit + ahead);
+                prefetch_line(own->depth + ahead);
             }
             const bool mine = own && own->hit[place];
             if (other_wins(
@@ -373,9 +375,9 @@ void merge_frames(const Hits<Depth>& own, const std::vector<Frame<Depth>>& other
         for (std::size_t k = 0; k < pixels.size(); ++k) {
             if (k + kRowsAhead < pixels.size()) {  // (the frames' rows at the pixels ahead: a cache miss each)
                 const int64_t ahead = pixels[k + kRowsAhead];
-                __builtin_prefetch(own.hit + ahead);
-                __builtin_prefetch(own.depth + ahead);
-                for (const Frame<Depth>& f : others) __builtin_prefetch(f.hits.depth + ahead);
+                prefetch_line(own.hit + ahead);
+                prefetch_line(own.depth + ahead);
+                for (const Frame<Depth>& f : others) prefetch_line(f.hits.depth + ahead);
             }
             const int64_t p = pixels[k];
             const int s = decide(p);

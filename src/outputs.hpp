@@ -119,7 +119,7 @@ class OutputWriter {
 
     /// Asks the cache for what storing a hit on triangle `prim` reads first (its input
     /// triangle index: scattered, mostly a miss).
-    void prefetch(uint32_t prim) const { __builtin_prefetch(scene_.prim_ids.data() + prim); }
+    void prefetch(uint32_t prim) const { prefetch_line(scene_.prim_ids.data() + prim); }
 
     /// Asks the cache for the rows of the point arrays the hits on triangles `prims` read
     /// (scattered in the mesh's point order: the interpolation's loads stalled on them).
@@ -129,7 +129,7 @@ class OutputWriter {
             for (int c = 0; c < 3; ++c) {
                 const std::size_t row = scene_.input_point(prims[i], c);
                 for (const auto& [f, interpolate] : point_fields_)
-                    __builtin_prefetch(static_cast<const char*>(f->values) + row * f->row_bytes);
+                    prefetch_line(static_cast<const char*>(f->values) + row * f->row_bytes);
             }
     }
 

@@ -433,20 +433,20 @@ class ProjectedScene {
     /// Asks the cache for what entering node n reads first: its children, or a leaf's
     /// triangles (their points' indices).
     void prefetch(const ProjectedNode& n) const {
-        if (n.count == 0) __builtin_prefetch(node_ + n.index);
-        else __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(n.index));
+        if (n.count == 0) prefetch_line(node_ + n.index);
+        else prefetch_line(scene_.triangles.data() + 3 * std::size_t(n.index));
     }
     /// Asks the cache for leaf n's triangles (their points' indices), every line of them.
     void prefetch_triangles(const ProjectedNode& n) const {
         const auto line = [](const void* p) { return reinterpret_cast<std::uintptr_t>(p) & ~std::uintptr_t(63); };
         const uint32_t* first = scene_.triangles.data() + 3 * std::size_t(n.index);
         for (std::uintptr_t p = line(first), end = line(first + 3 * n.count - 1); p <= end; p += 64)
-            __builtin_prefetch(reinterpret_cast<const void*>(p));
+            prefetch_line(reinterpret_cast<const void*>(p));
     }
     /// Asks the cache for the projected points of triangles first to first + count - 1.
     void prefetch_points(uint32_t first, uint32_t count) const {
         const uint32_t *p = scene_.triangles.data() + 3 * std::size_t(first), *end = p + 3 * count;
-        for (; p != end; ++p) __builtin_prefetch(points_ + 4 * std::size_t(*p));
+        for (; p != end; ++p) prefetch_line(points_ + 4 * std::size_t(*p));
     }
     [[nodiscard]] const double* to_anchor() const { return to_anchor_; }  ///< anchor - eye
     [[nodiscard]] const double* reach() const { return reach_; }          ///< box extent from the anchor
@@ -582,7 +582,7 @@ class ProjectedScene {
         __m128 lo = _mm_set1_ps(HUGE_VALF), hi = _mm_set1_ps(-HUGE_VALF);
         const uint32_t* list_end = tree.leaf_points.data() + tree.leaf_points.size();
         for (; p != end; ++p) {
-            if (list_end - p > kAhead) __builtin_prefetch(points_ + 4 * std::size_t(p[kAhead]));  // (the next leaves' points)
+            if (list_end - p > kAhead) prefetch_line(points_ + 4 * std::size_t(p[kAhead]));  // (the next leaves' points)
             const __m128 v = _mm_load_ps((*this)[*p]);
             lo = _mm_min_ps(lo, v);
             hi = _mm_max_ps(hi, v);

@@ -428,10 +428,10 @@ class BundleTracer {
                 const int c = order[i];
                 if (node.count[c] == 0) {
                     const char* next = reinterpret_cast<const char*>(&scene_.wide[node.child[c]]);
-                    for (int line = 0; line < 4; ++line) __builtin_prefetch(next + 64 * line);
+                    for (int line = 0; line < 4; ++line) prefetch_line(next + 64 * line);
                 } else {  // a leaf's point indices (its points follow when it is popped)
-                    __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(node.child[c]));
-                    __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(node.child[c] + node.count[c]) - 1);
+                    prefetch_line(scene_.triangles.data() + 3 * std::size_t(node.child[c]));
+                    prefetch_line(scene_.triangles.data() + 3 * std::size_t(node.child[c] + node.count[c]) - 1);
                 }
                 stack[top++] = {node.child[c], node.count[c], extent[0][c], nearest[c], rects[c]};
             }

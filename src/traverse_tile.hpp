@@ -513,7 +513,7 @@ class TileTracer {
                 depth_bound_[j] = double(far);
                 if (point_rows_) {  // (the rows of its corners are found through these when stored)
                     const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
-                    for (int k = 0; k < 3; ++k) __builtin_prefetch(scene_.point_ids.data() + tri[k]);
+                    for (int k = 0; k < 3; ++k) prefetch_line(scene_.point_ids.data() + tri[k]);
                 }
                 return true;
             }

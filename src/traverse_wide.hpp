@@ -286,7 +286,7 @@ class WideSearch {
         const uintptr_t as_node = reinterpret_cast<uintptr_t>(scene_.wide.data()) + sizeof(WideNode) * child;
         const uintptr_t as_leaf = reinterpret_cast<uintptr_t>(scene_.triangles.data()) + 3 * sizeof(uint32_t) * child;
         const char* next = reinterpret_cast<const char*>(count == 0 ? as_node : as_leaf);
-        for (int line = 0; line < 4; ++line) __builtin_prefetch(next + 64 * line);
+        for (int line = 0; line < 4; ++line) prefetch_line(next + 64 * line);
         stack_[at] = {child, count, enter};
     }
 #if defined(__AVX2__)
@@ -328,8 +328,8 @@ class WideSearch {
         if constexpr (kStaged) {
             leaf_ = next;
             leaf_stage_ = 1;
-            __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(next.child));
-            __builtin_prefetch(scene_.triangles.data() + 3 * std::size_t(next.child + next.count) - 1);
+            prefetch_line(scene_.triangles.data() + 3 * std::size_t(next.child));
+            prefetch_line(scene_.triangles.data() + 3 * std::size_t(next.child + next.count) - 1);
             return After::step;
         } else {
             return leaf(next.child, next.count) ? After::stop : After::pop;
