@@ -72,6 +72,9 @@ class TileTracer {
 
     /// Per-pixel arrays hold a whole tile (a packet, or a flat scene's block), row by row.
     static constexpr int64_t kStride = CameraRays::kTile, kQuads = kStride / 2;
+    /// The point arrays' rows a row of hits interpolates are asked for this many rows before
+    /// it is stored: a whole tile's at once outgrew the cache before the last were read.
+    static constexpr int64_t kRowsAhead = 2;
     static_assert(kStride >= 2 && (kStride & (kStride - 1)) == 0, "test_pixels finds a pixel's quad with masks");
     static_assert(kStride <= 64, "a row's made rays are the bits of one word");
 
@@ -178,8 +181,9 @@ class TileTracer {
     void finish(Store& store) {
         if (!by_triangle_) complete_sure_hits();
         uint64_t hits[kStride];
-        std::size_t n_hits = 0;
+        std::size_t n_hits = 0, row_hits[kStride + 1];
         for (int64_t r = 0; r < height_; ++r) {
+            row_hits[r] = n_hits;
             hits[r] = sure_bits_[r];
             for (uint64_t m = made_[r]; m != 0; m &= m - 1) {
                 const int64_t j = __builtin_ctzll(m) + r * kStride;
@@ -188,8 +192,13 @@ class TileTracer {
             for (uint64_t m = sure_bits_[r]; m != 0; m &= m - 1)
                 store.prefetch(hit_prims_[n_hits++] = sure_[__builtin_ctzll(m) + r * kStride]);
         }
-        store.prefetch_rows(hit_prims_, n_hits);
-        for (int64_t r = 0; r < height_; ++r)
+        row_hits[height_] = n_hits;
+        const auto rows_of = [&](int64_t r) {
+            if (r < height_) store.prefetch_rows(hit_prims_ + row_hits[r], row_hits[r + 1] - row_hits[r]);
+        };
+        for (int64_t r = 0; r < kRowsAhead; ++r) rows_of(r);
+        for (int64_t r = 0; r < height_; ++r) {
+            rows_of(r + kRowsAhead);
             for (int64_t c = 0; c < width_;) {
                 const int64_t j = c + r * kStride;
                 const uint64_t ahead = hits[r] >> c;
@@ -205,6 +214,7 @@ class TileTracer {
                     store(pixel(j), ray_[j], hit_[j]);
                 ++c;
             }
+        }
     }
 
     /// Makes the pixels settled by sure hits hits of rays made, when the cast asks for their
