@@ -1,6 +1,7 @@
-// Large buffers: transparent huge pages for them (fresh memory is faulted in a 4 KiB page at
-// a time otherwise, which showed in build profiles), and the working memory a scene lends
-// its camera casts and keeps for the next one (fresh pages would cost a page fault and their
+// Memory: cache lines asked for ahead of their reads; transparent huge pages for large
+// buffers (fresh memory is faulted in a 4 KiB page at a time otherwise, which showed in
+// build profiles, and random reads miss the TLB); and the working memory a scene lends its
+// camera casts and keeps for the next one (fresh pages would cost a page fault and their
 // zeroing on every cast: about 9 % of a frog re-cast in perf samples).
 #pragma once
 
