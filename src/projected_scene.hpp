@@ -129,12 +129,12 @@ class Footprint {
 /// links (as in Node), 16 bytes, so a node's children are tested and entered from one
 /// cache line without touching the BVH's own boxes.
 struct ProjectedNode {
-    static constexpr std::size_t kMaxIndex = std::size_t(1) << 27;  // for the 27-bit index
+    static constexpr std::size_t kMaxIndex = std::size_t(1) << 26;  // for the 26-bit index
     ImageRect rect;
-    uint32_t index : 27;  ///< first child, or first triangle
-    uint32_t count : 5;   ///< triangles of a leaf (at most CameraTree::kMaxLeaf), 0 for an inner node
+    uint32_t index : 26;  ///< first child, or first triangle
+    uint32_t count : 6;   ///< triangles of a leaf (at most CameraTree::kMaxLeaf), 0 for an inner node
 };
-static_assert(CameraTree::kMaxLeaf < 32, "a leaf's count is 5 bits");
+static_assert(CameraTree::kMaxLeaf < 64, "a leaf's count is 6 bits");
 static_assert(sizeof(ProjectedNode) == 16, "projected nodes are meant to be 16 bytes");
 
 /// Each point's pixel column, row and depth for one camera, computed once per cast (the

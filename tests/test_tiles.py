@@ -287,7 +287,7 @@ def test_node_rectangles_framed_by_many_workers(build_threads):
     then laid out), a root that is a leaf, and more workers than subtrees to go round."""
     mesh = bumpy_sphere(5)
     scene = vrc.Scene(mesh, threads=build_threads)
-    assert scene._core.n_camera_nodes > 1000  # many subtrees
+    assert scene._core.n_camera_nodes > 500  # many subtrees
     for threads in (1, 2, 5):
         assert assert_same_as_ray_by_ray(scene, around(mesh, nx=160, ny=120), threads=threads) > 3000
     two = pv.Plane(i_resolution=1, j_resolution=1).triangulate()
@@ -296,13 +296,13 @@ def test_node_rectangles_framed_by_many_workers(build_threads):
         assert compare(vrc.Scene(two), vrc.Scene(two), around(two), threads=threads) > 0
 
 
-def test_camera_tree_leaves_hold_up_to_31_triangles():
-    """Camera casts go through the BVH with every subtree of at most 31 triangles collapsed
-    into one leaf (the BVH's own leaves hold at most 8): 31 triangles make one leaf, 32 a
+def test_camera_tree_leaves_hold_up_to_63_triangles():
+    """Camera casts go through the BVH with every subtree of at most 63 triangles collapsed
+    into one leaf (the BVH's own leaves hold at most 8): 63 triangles make one leaf, 64 a
     root over two; casts through either equal the rays cast one by one through the BVH."""
-    grid = pv.Plane(i_resolution=4, j_resolution=4).triangulate()
-    assert grid.n_cells == 32
-    for n, camera_nodes in ((31, 1), (32, 3)):
+    grid = pv.Plane(i_resolution=8, j_resolution=4).triangulate()
+    assert grid.n_cells == 64
+    for n, camera_nodes in ((63, 1), (64, 3)):
         mesh = pv.PolyData(grid.points, grid.faces[: 4 * n])
         scene = vrc.Scene(mesh)
         assert scene._core.n_nodes > camera_nodes
