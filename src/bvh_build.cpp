@@ -1,5 +1,6 @@
 // Binned SAH builder (Wald 2007, "On fast construction of SAH-based bounding volume
-// hierarchies"): 16 bins on each axis, the cheapest plane or a leaf. Two passes per node:
+// hierarchies"): 16 bins on each axis, the cheapest plane or a leaf, triangles counted in
+// the single-ray filter's blocks of four (in_blocks). Two passes per node:
 // the binning, which also gives the children's boxes and centroid boxes (each bin keeps
 // both), and the partition, which reads each triangle's bin from the binning. Triangle
 // boxes are computed once, in float relative to the anchor and rounded outward.
@@ -25,6 +26,13 @@
 #include <vector>
 
 #include "bvh.hpp"
+
+namespace vrc {
+/// Triangles as the SAH counts them: in the single-ray filter's blocks of four
+/// (triangle_filter.hpp), so that a leaf of five costs as much as one of eight (Embree's
+/// builders count their four-wide leaves the same way).
+constexpr uint32_t in_blocks(uint32_t n) { return (n + 3) & ~3u; }
+}  // namespace vrc
 
 // The builder below needs AVX2 (and BMI1, POPCNT), which the default build enables
 // (-march=native, VTKRAYCAST_NATIVE). Other targets get the previous, portable builder at
@@ -259,14 +267,18 @@ Split best_split(const Bins& bins, const Binner& binner, uint32_t count, const V
         a2 = _mm256_max_ps(bins.box[2][b], a2);
         n = _mm_add_epi32(n, _mm_load_si128(reinterpret_cast<const __m128i*>(bins.count[b])));
         _mm_store_si128(reinterpret_cast<__m128i*>(n_left[b]), n);
-        const __m128 nr = _mm_cvtepi32_ps(_mm_load_si128(reinterpret_cast<const __m128i*>(n_right[b + 1])));
-        const __m128 sum = _mm_add_ps(_mm_mul_ps(half_areas(a0, a1, a2), _mm_cvtepi32_ps(n)), _mm_mul_ps(right_area[b + 1], nr));
+        const auto in_blocks4 = [](__m128i c) {  // (in_blocks, lane by lane)
+            return _mm_cvtepi32_ps(_mm_and_si128(_mm_add_epi32(c, _mm_set1_epi32(3)), _mm_set1_epi32(~3)));
+        };
+        const __m128 nr = in_blocks4(_mm_load_si128(reinterpret_cast<const __m128i*>(n_right[b + 1])));
+        const __m128 nl = in_blocks4(n);
+        const __m128 sum = _mm_add_ps(_mm_mul_ps(half_areas(a0, a1, a2), nl), _mm_mul_ps(right_area[b + 1], nr));
         _mm_store_ps(cost[b], _mm_add_ps(traversal, _mm_mul_ps(sum, inv_area)));
     }
     // The scalar choice: the first (axis-major) of the cheapest valid planes, if cheaper than a
     // leaf. Invalid planes (an empty side, an axis without extent) and NaN costs never win.
     Split best;
-    const float leaf_cost = static_cast<float>(count);
+    const float leaf_cost = static_cast<float>(in_blocks(count));
     const __m128 axis_ok = _mm_cmpneq_ps(binner.scale, _mm_setzero_ps());
     const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
     __m128 min_cost = inf;
@@ -950,7 +962,7 @@ struct Builder {
                 ++counts[k][b];
             }
         }
-        float best_cost = static_cast<float>(count);  // cost of a leaf
+        float best_cost = static_cast<float>(in_blocks(count));  // cost of a leaf
         int best_axis = -1, best_bin = 0;
         const float inv_area = 1.0f / std::max(bounds.half_area(), 1e-30f);
         for (int k = 0; k < 3; ++k) {
@@ -970,7 +982,8 @@ struct Builder {
             for (int b = 0; b < n_bins - 1; ++b) {
                 acc.grow(bins[k][b]);
                 n += counts[k][b];
-                const float cost = kTraversalCost + (acc.half_area() * n + right_area[b + 1] * right_count[b + 1]) * inv_area;
+                const float cost = kTraversalCost + (acc.half_area() * float(in_blocks(n)) +
+                                                     right_area[b + 1] * float(in_blocks(right_count[b + 1]))) * inv_area;
                 if (n > 0 && right_count[b + 1] > 0 && cost < best_cost) {
                     best_cost = cost;
                     best_axis = k;
