@@ -29,12 +29,11 @@ static_assert(sizeof(Node) == 32, "nodes are meant to be 32 bytes");
 /// on its image rectangle, so a node visit (a dependent load, mostly a cache miss) costs
 /// it more than a triangle, where a single ray's triangle test is a whole kernel (the SAH
 /// building such leaves made the frog's camera casts faster and its rays cast one by one
-/// 1.26x slower: this tree serves the first and leaves the second alone). Leaves of up to
-/// 63 rather than 31: a view whose triangles are smaller than its pixels (the terrain's
-/// framed view, 15 per covered pixel) visits every leaf, and fewer leaves cost less there
-/// (benchmarks/compare_builds.py, default arrays: terrain framed 0.885x the time, frog
-/// framed 0.955x, the channels' views 0.99x to 1.00x); 15 took 1.27x on the terrain. An
-/// eighth of the BVH's nodes on the frog, so an eighth of the per-camera framing.
+/// 1.26x slower: this tree serves the first and leaves the second alone). Leaves this
+/// large because a view whose triangles are smaller than its pixels (the terrain's framed
+/// view, 15 per covered pixel) visits every leaf, each visit waiting on a node's links;
+/// larger still cost views that crop a model (the frog's full view). An eighth of the
+/// BVH's nodes on the frog, so an eighth of the per-camera framing.
 struct CameraTree {
     static constexpr uint32_t kMaxLeaf = 63;
     /// As Node's links: the first child (the second follows it), or the first triangle and

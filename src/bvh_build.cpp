@@ -259,6 +259,9 @@ Split best_split(const Bins& bins, const Binner& binner, uint32_t count, const V
     }
     const __m128 inv_area = _mm_set1_ps(1.0f / std::max(bounds.half_area(), 1e-30f));
     const __m128 traversal = _mm_set1_ps(kTraversalCost);
+    const auto in_blocks4 = [](__m128i c) {  // (in_blocks, lane by lane)
+        return _mm_cvtepi32_ps(_mm_and_si128(_mm_add_epi32(c, _mm_set1_epi32(3)), _mm_set1_epi32(~3)));
+    };
     a0 = a1 = a2 = empty;
     n = _mm_setzero_si128();
     for (int b = 0; b < n_bins - 1; ++b) {
@@ -267,9 +270,6 @@ Split best_split(const Bins& bins, const Binner& binner, uint32_t count, const V
         a2 = _mm256_max_ps(bins.box[2][b], a2);
         n = _mm_add_epi32(n, _mm_load_si128(reinterpret_cast<const __m128i*>(bins.count[b])));
         _mm_store_si128(reinterpret_cast<__m128i*>(n_left[b]), n);
-        const auto in_blocks4 = [](__m128i c) {  // (in_blocks, lane by lane)
-            return _mm_cvtepi32_ps(_mm_and_si128(_mm_add_epi32(c, _mm_set1_epi32(3)), _mm_set1_epi32(~3)));
-        };
         const __m128 nr = in_blocks4(_mm_load_si128(reinterpret_cast<const __m128i*>(n_right[b + 1])));
         const __m128 nl = in_blocks4(n);
         const __m128 sum = _mm_add_ps(_mm_mul_ps(half_areas(a0, a1, a2), nl), _mm_mul_ps(right_area[b + 1], nr));

@@ -18,8 +18,8 @@ namespace vrc {
 
 /// Asks the cache for the line holding `p` (any address: a prefetch never faults). Not
 /// __builtin_prefetch: GCC takes that for an instruction without effect and deletes a loop
-/// that does nothing else (it may assume such a loop ends, -ffinite-loops): the rows of
-/// the mesh's point arrays that a tile's hits interpolate were never asked for.
+/// that does nothing else (it may assume such a loop ends, -ffinite-loops), as a loop of
+/// prefetches ahead of the real loads is.
 [[gnu::always_inline]] inline void prefetch_line(const void* p) {
 #if defined(__x86_64__) || defined(__i386__)
     asm volatile("prefetcht0 %0" : : "m"(*static_cast<const char*>(p)));
