@@ -94,8 +94,31 @@ class Footprint {
         return below == 15 || above == 15 ? kInside : kMay;
     }
     [[nodiscard]] bool may_cover(int64_t col, int64_t r) const { return cover(col, row(r)) != kNone; }
+#if defined(__AVX2__)
+    /// may_cover of the eight pixels at columns col .. col + 7 of row r, as bits: cover's
+    /// float operations, an edge's eight pixels in the lanes of one register, so each lane
+    /// decides as cover does.
+    [[nodiscard]] unsigned may_cover8(int64_t col, int64_t r) const {
+        if (!known_) return 0xff;
+        const __m256 cols = _mm256_add_ps(_mm256_set1_ps(float(col)), _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7));
+        const __m128 at_row = row(r);
+        __m256 below = _mm256_setzero_ps(), above = below;  // some edge below -slack, some above slack
+        for (int k = 0; k < 3; ++k) {
+            const __m256 e = _mm256_sub_ps(lane(at_row, k), _mm256_mul_ps(lane(ey_, k), _mm256_sub_ps(cols, lane(x_, k))));
+            below = _mm256_or_ps(below, _mm256_cmp_ps(e, lane(minus_slack_, k), _CMP_LT_OQ));
+            above = _mm256_or_ps(above, _mm256_cmp_ps(e, lane(slack_, k), _CMP_GT_OQ));
+        }
+        return ~unsigned(_mm256_movemask_ps(_mm256_and_ps(below, above))) & 0xff;
+    }
+#endif
 
    private:
+#if defined(__AVX2__)
+    /// Lane k of v in all eight lanes.
+    [[nodiscard]] static __m256 lane(__m128 v, int k) {
+        return _mm256_permutevar8x32_ps(_mm256_castps128_ps256(v), _mm256_set1_epi32(k));
+    }
+#endif
     __m128 x_, y_, ex_, ey_, slack_, minus_slack_;
 #else
     /// From the projected points (column, row, depth, flag); evaluated in double.

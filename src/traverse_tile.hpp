@@ -63,7 +63,7 @@ class TileTracer {
         hit_.resize(n);
         bound_.resize(n);
         scale_.resize(n);
-        depth_bound_.assign(n, -HUGE_VAL);
+        depth_bound_.assign(n + 7, -HUGE_VAL);  // (test_pixels reads eight at a time)
         quad_.assign(n / 4, -HUGE_VAL);
         guess_far_.resize(n);
         guess_.resize(n);
@@ -475,6 +475,26 @@ class TileTracer {
     /// Tests triangle i on the block's pixels in `rect`.
     void test_pixels(uint32_t i, const PixelRect& rect) {
         std::optional<Footprint> footprint;  // set up once a pixel needs it (a quarter of the frog's never do)
+#if defined(__AVX2__)
+        // Eight pixels of a row at a time: the depth and footprint tests of each give bits,
+        // and only the pixels that pass both branch (a pixel's test changes only its own
+        // depth bound, so the later ones' bits stay right).
+        const __m256d near = _mm256_set1_pd(rect.near);
+        for (int64_t r = rect.r0; r <= rect.r1; ++r)
+            for (int64_t c = rect.c0; c <= rect.c1; c += 8) {
+                const double* bound = depth_bound_.data() + c + r * kStride;  // (padded: may read 7 past the end)
+                const unsigned beyond = unsigned(_mm256_movemask_pd(_mm256_cmp_pd(near, _mm256_loadu_pd(bound), _CMP_GT_OQ))) |
+                                        unsigned(_mm256_movemask_pd(_mm256_cmp_pd(near, _mm256_loadu_pd(bound + 4), _CMP_GT_OQ))) << 4;
+                unsigned open = ~beyond & (0xffu >> std::max<int64_t>(0, c + 7 - rect.c1));
+                if (!open) continue;
+                if (!footprint) {
+                    scene_.prefetch_points(i);  // for the kernel, while the footprint is set up
+                    footprint.emplace(projected_.footprint(i));
+                }
+                for (open &= footprint->may_cover8(i0_ + c, r0_ + r); open != 0; open &= open - 1)
+                    try_pixel(c + __builtin_ctz(open), r, i, float(rect.near), float(rect.far));
+            }
+#else
         for (int64_t r = rect.r0; r <= rect.r1; ++r)
             for (int64_t c = rect.c0; c <= rect.c1; ++c) {
                 const int64_t j = c + r * kStride;
@@ -485,6 +505,7 @@ class TileTracer {
                 }
                 if (footprint->may_cover(i0_ + c, r0_ + r)) try_pixel(c, r, i, float(rect.near), float(rect.far));
             }
+#endif
     }
 
     /// Tests triangle i, whose depths lie within [near, far] (when known), on the block's
