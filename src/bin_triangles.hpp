@@ -115,7 +115,7 @@ class TriangleBins {
     void rasterise(uint32_t i, __m128 pa, __m128 pb, __m128 pc, __m128 lo, __m128 hi, float near, int64_t c0, int64_t c1,
                    int64_t r0, int64_t r1, std::vector<Entry>* lists) const {
         if ((c1 - c0 + 1) * (r1 - r0 + 1) > kMaxPixels) return add_rect(lists, i, near, c0, c1, r0, r1);
-        const Footprint footprint(pa, pb, pc, lo, hi, projected_.margin());
+        const Footprint footprint(pa, pb, pc, lo, hi, projected_.margin(), projected_.sure_margin());
         const float far = _mm_cvtss_f32(_mm_movehl_ps(hi, hi));
         const auto test = [&](int64_t col, int64_t r, __m128 row) {
             const Footprint::Cover cover = footprint.cover(col, row);

@@ -60,8 +60,9 @@ class Footprint {
     /// bin_triangles.hpp; never claimed without SSE4.1).
     enum Cover { kNone, kMay, kInside };
 #if defined(__SSE4_1__)
-    /// From the projected points (column, row, depth, flag) and their box [lo, hi].
-    Footprint(__m128 pa, __m128 pb, __m128 pc, __m128 lo, __m128 hi, float margin)
+    /// From the projected points (column, row, depth, flag), their box [lo, hi], the
+    /// margin and the sure-hit test's (ProjectedScene::sure_margin).
+    Footprint(__m128 pa, __m128 pb, __m128 pc, __m128 lo, __m128 hi, float margin, float sure_margin)
         : known_(_mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) == 0) {
         const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(INT32_MAX));
         // Edge k runs from point k to point k + 1 (lane 3 repeats lane 2): its start (x, y)
@@ -82,6 +83,26 @@ class Footprint {
         slack_ = _mm_add_ps(_mm_mul_ps(_mm_set1_ps(m), _mm_add_ps(_mm_and_ps(ex_, abs_mask), _mm_and_ps(ey_, abs_mask))),
                             _mm_set1_ps(0x1p-120f));  // (products that underflow)
         minus_slack_ = _mm_xor_ps(slack_, _mm_set1_ps(-0.0f));
+        const __m128 extent = _mm_sub_ps(hi, lo);
+        const float reach = _mm_cvtss_f32(extent) + _mm_cvtss_f32(_mm_shuffle_ps(extent, extent, 1)) + 2 * margin;
+        const __m128 edge = _mm_add_ps(_mm_and_ps(ex_, abs_mask), _mm_and_ps(ey_, abs_mask));
+        sure_slack_ = sure_slack(edge, _mm_set1_ps(sure_margin + 0x1p-23f * size), _mm_set1_ps(reach));
+    }
+    /// The sure-hit test's bound on an edge function (see ProjectedScene::SureHits) from
+    /// |ex| + |ey| of the edge (`edge`), M (`m`) and `reach`, the width plus height of the
+    /// points' box plus twice the margin: a pixel centre of the triangle's rectangle lies
+    /// within it of any of the points in the 1-norm. M |B - A| + 2M reach + 4M^2, plus the
+    /// single-precision edge function's rounding: under 5 roundings of |ex dy| + |ey dx|
+    /// (ex, ey, dy = r - y, dx = c - x and the products each rounded once, then their
+    /// difference), at most 2^-21 |B - A| reach. Widened for its own roundings (of positive
+    /// terms), and by 2^-120 for products that underflow.
+    template <class V>
+    [[nodiscard]] static V sure_slack(V edge, V m, V reach) {
+        const auto add = [](V a, V b) { if constexpr (sizeof(V) == 16) return _mm_add_ps(a, b); else return _mm256_add_ps(a, b); };
+        const auto mul = [](V a, V b) { if constexpr (sizeof(V) == 16) return _mm_mul_ps(a, b); else return _mm256_mul_ps(a, b); };
+        const auto set = [](float x) { if constexpr (sizeof(V) == 16) return _mm_set1_ps(x); else return _mm256_set1_ps(x); };
+        const V bound = add(mul(edge, add(m, mul(set(0x1p-21f), reach))), mul(m, add(mul(set(2), reach), mul(set(4), m))));
+        return add(mul(bound, set(1 + 0x1p-18f)), set(0x1p-120f));
     }
     /// Row r's part of the edge functions, shared by the pixels of a row.
     [[nodiscard]] __m128 row(int64_t r) const { return _mm_mul_ps(ex_, _mm_sub_ps(_mm_set1_ps(float(r)), y_)); }
@@ -97,18 +118,25 @@ class Footprint {
 #if defined(__AVX2__)
     /// may_cover of the eight pixels at columns col .. col + 7 of row r, as bits: cover's
     /// float operations, an edge's eight pixels in the lanes of one register, so each lane
-    /// decides as cover does.
-    [[nodiscard]] unsigned may_cover8(int64_t col, int64_t r) const {
-        if (!known_) return 0xff;
+    /// decides as cover does. Second, the pixels the triangle surely covers: every edge
+    /// function beyond the sure-hit bound with one sign (only positive when not
+    /// `either_side`; see ProjectedScene::SureHits, which also needs the depths).
+    [[nodiscard]] std::pair<unsigned, unsigned> may_cover8(int64_t col, int64_t r, bool either_side) const {
+        if (!known_) return {0xff, 0};
         const __m256 cols = _mm256_add_ps(_mm256_set1_ps(float(col)), _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7));
         const __m128 at_row = row(r);
         __m256 below = _mm256_setzero_ps(), above = below;  // some edge below -slack, some above slack
+        __m256 positive = _mm256_castsi256_ps(_mm256_set1_epi32(-1)), negative = positive;  // every edge beyond the sure bound
         for (int k = 0; k < 3; ++k) {
             const __m256 e = _mm256_sub_ps(lane(at_row, k), _mm256_mul_ps(lane(ey_, k), _mm256_sub_ps(cols, lane(x_, k))));
             below = _mm256_or_ps(below, _mm256_cmp_ps(e, lane(minus_slack_, k), _CMP_LT_OQ));
             above = _mm256_or_ps(above, _mm256_cmp_ps(e, lane(slack_, k), _CMP_GT_OQ));
+            const __m256 sure = lane(sure_slack_, k);
+            positive = _mm256_and_ps(positive, _mm256_cmp_ps(e, sure, _CMP_GT_OQ));
+            negative = _mm256_and_ps(negative, _mm256_cmp_ps(e, _mm256_xor_ps(sure, _mm256_set1_ps(-0.0f)), _CMP_LT_OQ));
         }
-        return ~unsigned(_mm256_movemask_ps(_mm256_and_ps(below, above))) & 0xff;
+        const unsigned sure = unsigned(_mm256_movemask_ps(positive)) | (either_side ? unsigned(_mm256_movemask_ps(negative)) : 0);
+        return {~unsigned(_mm256_movemask_ps(_mm256_and_ps(below, above))) & 0xff, sure};
     }
 #endif
 
@@ -119,7 +147,7 @@ class Footprint {
         return _mm256_permutevar8x32_ps(_mm256_castps128_ps256(v), _mm256_set1_epi32(k));
     }
 #endif
-    __m128 x_, y_, ex_, ey_, slack_, minus_slack_;
+    __m128 x_, y_, ex_, ey_, slack_, minus_slack_, sure_slack_;
 #else
     /// From the projected points (column, row, depth, flag); evaluated in double.
     Footprint(const float* a, const float* b, const float* c, float margin) : known_(a[3] + b[3] + c[3] == 0) {
@@ -202,10 +230,11 @@ class ProjectedScene {
         projection_margin_ = map_.margin + (c.parallel ? 16 * kEps * parallel_size : 0);
         const double margin = projection_margin_ + 0x1p-21 * double(std::max(c.nx, c.ny) + 2);
         margin_ = round_up(margin);
+        sure_margin_ = round_up(projection_margin_);
         slack_ = std::max(round_up(2 * depth_slack_), std::numeric_limits<float>::min());
         near_ = -round_up(-c.near), far_ = round_up(c.far);  // rounded outward
         // A triangle's depths must clear the camera's range by more than the kernel's and
-        // the ray's t range's roundings (tiny beside 2^-20) for its hit to be sure (`surely_hit`).
+        // the ray's t range's roundings (tiny beside 2^-20) for its hit to be sure (SureHits).
         sure_near_ = round_up(c.near + std::fabs(c.near) * 0x1p-20 + slack_);
         sure_far_ = std::isinf(c.far) ? HUGE_VALF : -round_up(-(c.far - std::fabs(c.far) * 0x1p-20 - slack_));
 #if defined(__SSE4_1__)
@@ -279,10 +308,11 @@ class ProjectedScene {
         return near > far_ || far < near_ ? HUGE_VALF : near;
     }
 
-#if defined(__AVX2__)
-    /// Whether the watertight kernel, in double, surely hits triangle i (leaf order) on the
-    /// ray of the pixel at column `col`, row `row`, within the ray's t range, given bounds
-    /// [near, far] on the triangle's depths (from `triangles8`).
+    /// SureHits: whether the watertight kernel, in double, surely hits a triangle on the ray
+    /// of a pixel, within the ray's t range, given bounds [near, far] on the triangle's
+    /// depths (from `triangles8`): Footprint::may_cover8 and cover8 tell it with the edge
+    /// functions they evaluate anyway, against a wider bound (Footprint::sure_slack), and
+    /// sure_depths checks the depths.
     ///
     /// Why: the projection's margin bounds, per coordinate, the distance of the pixel centre
     /// p from the exact projection p* of its ray plus that of a point's projection from its
@@ -292,8 +322,10 @@ class ProjectedScene {
     /// For the edge from A to B, E(p) = (B - A) x (p - A) differs from the exact E'(p*) =
     /// (B' - A') x (p* - A') by (B - A) x (p* - p - A' + A) + (B' - B - A' + A) x (p - A) +
     /// the product of the two perturbations: at most M |B - A| + 2M |p - A| + 4M^2 (|.| the
-    /// 1-norm; p - B serves as well as p - A). Evaluated in double from the stored floats, E carries no
-    /// rounding worth the name (2^-48 of its terms is allowed). When all three edges clear
+    /// 1-norm). Evaluated in single precision from the stored floats, E carries the
+    /// footprint's rounding, which its slack bounds with M |B - A|; a pixel centre of the
+    /// triangle's rectangle lies within the width plus height of the points' box plus one
+    /// of A (and any point) in the 1-norm. When all three edges clear
     /// that bound with one sign, every exact edge function at p* has that sign: the exact ray
     /// passes strictly inside the exact triangle (a central or parallel projection keeps the
     /// sign of det[A - O, B - O, d] for points in front). The kernel's edge functions take
@@ -304,36 +336,10 @@ class ProjectedScene {
     /// projection keeps the orientation of points in front, so their sum, the projected
     /// (B - A) x (C - A), is then positive: the triangle's right-hand normal points at the
     /// eye, as the kernel's det > 0, and it is not culled.
-    [[nodiscard]] bool surely_hit(uint32_t i, int64_t col, int64_t row, float near, float far, bool front_only) const {
-        if (!(near > sure_near_ && far < sure_far_)) return false;
-        const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
-        const float* p[3] = {(*this)[tri[0]], (*this)[tri[1]], (*this)[tri[2]]};
-        if (p[0][3] + p[1][3] + p[2][3] != 0) return false;  // a point with no usable projection
-        const double x = double(col), y = double(row);
-        // The three edges in lanes 0 to 2 (lane 3 repeats lane 2).
-        const auto lanes = [](double a, double b, double c) { return _mm256_setr_pd(a, b, c, c); };
-        const __m256d ax = lanes(p[0][0], p[1][0], p[2][0]), ay = lanes(p[0][1], p[1][1], p[2][1]);
-        const __m256d bx = lanes(p[1][0], p[2][0], p[0][0]), by = lanes(p[1][1], p[2][1], p[0][1]);
-        const __m256d abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(INT64_MAX));
-        const auto abs = [&](__m256d v) { return _mm256_and_pd(v, abs_mask); };
-        const __m256d big = _mm256_max_pd(abs(ax), abs(ay));
-        const __m128d half = _mm_max_pd(_mm256_castpd256_pd128(big), _mm256_extractf128_pd(big, 1));
-        const double size = std::max(_mm_cvtsd_f64(half), _mm_cvtsd_f64(_mm_unpackhi_pd(half, half)));
-        const __m256d m = _mm256_set1_pd(projection_margin_ + 0x1p-23 * size), X = _mm256_set1_pd(x), Y = _mm256_set1_pd(y);
-        const __m256d ex = _mm256_sub_pd(bx, ax), ey = _mm256_sub_pd(by, ay), dx = _mm256_sub_pd(X, ax), dy = _mm256_sub_pd(Y, ay);
-        const __m256d e = _mm256_sub_pd(_mm256_mul_pd(ex, dy), _mm256_mul_pd(ey, dx));
-        const __m256d from_a = _mm256_add_pd(abs(dx), abs(dy));
-        const __m256d from_b = _mm256_add_pd(abs(_mm256_sub_pd(X, bx)), abs(_mm256_sub_pd(Y, by)));
-        const __m256d edge = _mm256_add_pd(abs(ex), abs(ey));
-        __m256d bound = _mm256_mul_pd(m, _mm256_add_pd(edge, _mm256_mul_pd(_mm256_set1_pd(2), _mm256_min_pd(from_a, from_b))));
-        bound = _mm256_add_pd(bound, _mm256_mul_pd(_mm256_set1_pd(4), _mm256_mul_pd(m, m)));
-        bound = _mm256_add_pd(bound, _mm256_mul_pd(_mm256_set1_pd(0x1p-48), _mm256_mul_pd(edge, from_a)));
-        bound = _mm256_add_pd(_mm256_mul_pd(bound, _mm256_set1_pd(1 + 0x1p-40)), _mm256_set1_pd(0x1p-1000));
-        const int below = _mm256_movemask_pd(_mm256_cmp_pd(e, _mm256_xor_pd(bound, _mm256_set1_pd(-0.0)), _CMP_LT_OQ));
-        const int above = _mm256_movemask_pd(_mm256_cmp_pd(e, bound, _CMP_GT_OQ));
-        return above == 15 || (below == 15 && !front_only);
-    }
-#endif
+    [[nodiscard]] bool sure_depths(float near, float far) const { return near > sure_near_ && far < sure_far_; }
+    /// M less the points' storage rounding (see SureHits), rounded up to single precision.
+    [[nodiscard]] float sure_margin() const { return sure_margin_; }
+
 
     /// Through a BVH, triangle i's rectangle (leaf order).
     [[nodiscard]] ImageRect triangle(uint32_t i) const {
@@ -407,10 +413,14 @@ class ProjectedScene {
         r.near = _mm256_blendv_ps(r.near, _mm256_set1_ps(HUGE_VALF), empty);
         return r;
     }
-    /// Which lanes of `q` may be hit by the ray of their pixel at (col0, row0), and which
-    /// by that of their pixel at (col1, row1): Footprint's test, the same operations on the
-    /// same floats, eight triangles at once.
-    [[nodiscard]] std::pair<__m256, __m256> may_cover8(const Rects8& q, __m256 col0, __m256 row0, __m256 col1, __m256 row1) const {
+    /// Footprint's test and the sure-hit test (see SureHits) of the eight triangles of `q`
+    /// on the rays of their pixels at (col0, row0) and at (col1, row1): which lanes may be
+    /// hit there (`may`), and which surely are (`sure`; the positive side only unless
+    /// `either_side`). Footprint's operations on the same floats, eight triangles at once.
+    struct Cover8 {
+        __m256 may[2], sure[2];
+    };
+    [[nodiscard]] Cover8 cover8(const Rects8& q, __m256 col0, __m256 row0, __m256 col1, __m256 row1, bool either_side) const {
         const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(INT32_MAX));
         const auto abs = [&](__m256 v) { return _mm256_and_ps(v, abs_mask); };
         __m256 size = _mm256_setzero_ps();
@@ -420,21 +430,35 @@ class ProjectedScene {
             _mm256_mul_ps(_mm256_set1_ps(1.01f), margin),
             _mm256_mul_ps(_mm256_set1_ps(0x1p-20f),
                           _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(3), size), margin), _mm256_set1_ps(2))));
-        __m256 below[2] = {}, above[2] = {};
+        const auto extent = [](const __m256 p[3]) {
+            return _mm256_sub_ps(_mm256_max_ps(_mm256_max_ps(p[0], p[1]), p[2]), _mm256_min_ps(_mm256_min_ps(p[0], p[1]), p[2]));
+        };
+        const __m256 sure_m = _mm256_add_ps(_mm256_set1_ps(sure_margin_), _mm256_mul_ps(_mm256_set1_ps(0x1p-23f), size));
+        const __m256 reach = _mm256_add_ps(_mm256_add_ps(extent(q.x), extent(q.y)), _mm256_add_ps(margin, margin));
+        const __m256 all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+        __m256 below[2] = {}, above[2] = {}, positive[2] = {all, all}, negative[2] = {all, all};
         for (int k = 0; k < 3; ++k) {
             const __m256 ex = _mm256_sub_ps(q.x[(k + 1) % 3], q.x[k]), ey = _mm256_sub_ps(q.y[(k + 1) % 3], q.y[k]);
             const __m256 slack = _mm256_add_ps(_mm256_mul_ps(m, _mm256_add_ps(abs(ex), abs(ey))), _mm256_set1_ps(0x1p-120f));
             const __m256 minus_slack = _mm256_xor_ps(slack, _mm256_set1_ps(-0.0f));
+            const __m256 sure = Footprint::sure_slack(_mm256_add_ps(abs(ex), abs(ey)), sure_m, reach), minus_sure = _mm256_xor_ps(sure, _mm256_set1_ps(-0.0f));
             const __m256 col[2] = {col0, col1}, row[2] = {row0, row1};
             for (int p = 0; p < 2; ++p) {
                 const __m256 e = _mm256_sub_ps(_mm256_mul_ps(ex, _mm256_sub_ps(row[p], q.y[k])), _mm256_mul_ps(ey, _mm256_sub_ps(col[p], q.x[k])));
                 below[p] = _mm256_or_ps(below[p], _mm256_cmp_ps(e, minus_slack, _CMP_LT_OQ));
                 above[p] = _mm256_or_ps(above[p], _mm256_cmp_ps(e, slack, _CMP_GT_OQ));
+                positive[p] = _mm256_and_ps(positive[p], _mm256_cmp_ps(e, sure, _CMP_GT_OQ));
+                negative[p] = _mm256_and_ps(negative[p], _mm256_cmp_ps(e, minus_sure, _CMP_LT_OQ));
             }
         }
-        const __m256 all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
-        return {_mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[0], above[0]), all)),
-                _mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[1], above[1]), all))};
+        const __m256 possible = _mm256_andnot_ps(q.unknown, _mm256_and_ps(_mm256_cmp_ps(q.near, _mm256_set1_ps(sure_near_), _CMP_GT_OQ),
+                                                                          _mm256_cmp_ps(q.far, _mm256_set1_ps(sure_far_), _CMP_LT_OQ)));
+        Cover8 c;
+        for (int p = 0; p < 2; ++p) {
+            c.may[p] = _mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[p], above[p]), all));
+            c.sure[p] = _mm256_and_ps(possible, either_side ? _mm256_or_ps(positive[p], negative[p]) : positive[p]);
+        }
+        return c;
     }
 #endif
 
@@ -443,7 +467,7 @@ class ProjectedScene {
         const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
 #if defined(__SSE4_1__)
         const __m128 pa = _mm_load_ps((*this)[tri[0]]), pb = _mm_load_ps((*this)[tri[1]]), pc = _mm_load_ps((*this)[tri[2]]);
-        return Footprint(pa, pb, pc, _mm_min_ps(_mm_min_ps(pa, pb), pc), _mm_max_ps(_mm_max_ps(pa, pb), pc), margin_);
+        return Footprint(pa, pb, pc, _mm_min_ps(_mm_min_ps(pa, pb), pc), _mm_max_ps(_mm_max_ps(pa, pb), pc), margin_, sure_margin_);
 #else
         return Footprint((*this)[tri[0]], (*this)[tri[1]], (*this)[tri[2]], margin_);
 #endif
@@ -677,7 +701,7 @@ class ProjectedScene {
     ProjectedNode* node_;
     double to_anchor_[3], reach_[3], depth_slack_;
     float margin_, slack_, near_, far_;  // in single precision: see the constructor
-    float sure_near_, sure_far_;         // see `surely_hit`
+    float sure_near_, sure_far_, sure_margin_;  // see SureHits
     double projection_margin_;           // the projection's own margin (in margin_, with the storage's)
     /// A subtree: its root, then its other nodes [first, end) (empty for a leaf).
     struct Subtree {

@@ -427,8 +427,9 @@ class TileTracer {
             const __m256 spread = _mm256_add_ps(_mm256_sub_ps(c1, c0), _mm256_sub_ps(rr1, rr0));
             const unsigned single = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, _mm256_setzero_ps(), _CMP_EQ_OQ)));
             const unsigned pair = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, _mm256_set1_ps(1), _CMP_EQ_OQ)));
-            const auto [at_first, at_last] = projected_.may_cover8(q, c0, rr0, c1, rr1);
-            const unsigned first_ok = unsigned(_mm256_movemask_ps(at_first)), last_ok = unsigned(_mm256_movemask_ps(at_last));
+            const ProjectedScene::Cover8 cover = projected_.cover8(q, c0, rr0, c1, rr1, !context_.cull_back_faces);
+            const unsigned first_ok = unsigned(_mm256_movemask_ps(cover.may[0])), last_ok = unsigned(_mm256_movemask_ps(cover.may[1]));
+            const unsigned sure_first = unsigned(_mm256_movemask_ps(cover.sure[0])), sure_last = unsigned(_mm256_movemask_ps(cover.sure[1]));
             alignas(32) int32_t rect[4][8];  // in the block's coordinates
             alignas(32) float near[8], far[8];
             const __m256 to_c = _mm256_set1_ps(float(i0_)), to_r = _mm256_set1_ps(float(r0_));
@@ -448,13 +449,13 @@ class TileTracer {
                     continue;
                 }
                 bool fetched = false;
-                const auto test = [&](int64_t c, int64_t r) {
+                const auto test = [&](int64_t c, int64_t r, unsigned sure) {
                     if (double(near[k]) > depth_bound_[c + r * kStride]) return;
                     if (!fetched) scene_.prefetch_points(triangle), fetched = true;  // (for the kernel)
-                    try_pixel(c, r, triangle, near[k], far[k]);
+                    try_pixel(c, r, triangle, near[k], far[k], sure >> k & 1);
                 };
-                if (on_first >> k & 1) test(rect[0][k], rect[2][k]);
-                if (on_last >> k & 1) test(rect[1][k], rect[3][k]);
+                if (on_first >> k & 1) test(rect[0][k], rect[2][k], sure_first);
+                if (on_last >> k & 1) test(rect[1][k], rect[3][k], sure_last);
             }
         }
 #else
@@ -480,6 +481,7 @@ class TileTracer {
         // and only the pixels that pass both branch (a pixel's test changes only its own
         // depth bound, so the later ones' bits stay right).
         const __m256d near = _mm256_set1_pd(rect.near);
+        const bool sure_depths = projected_.sure_depths(float(rect.near), float(rect.far)), either_side = !context_.cull_back_faces;
         for (int64_t r = rect.r0; r <= rect.r1; ++r)
             for (int64_t c = rect.c0; c <= rect.c1; c += 8) {
                 const double* bound = depth_bound_.data() + c + r * kStride;  // (padded: may read 7 past the end)
@@ -491,8 +493,11 @@ class TileTracer {
                     scene_.prefetch_points(i);  // for the kernel, while the footprint is set up
                     footprint.emplace(projected_.footprint(i));
                 }
-                for (open &= footprint->may_cover8(i0_ + c, r0_ + r); open != 0; open &= open - 1)
-                    try_pixel(c + __builtin_ctz(open), r, i, float(rect.near), float(rect.far));
+                const auto [may, sure] = footprint->may_cover8(i0_ + c, r0_ + r, either_side);
+                for (open &= may; open != 0; open &= open - 1) {
+                    const int b = __builtin_ctz(open);
+                    try_pixel(c + b, r, i, float(rect.near), float(rect.far), sure_depths && (sure >> b & 1));
+                }
             }
 #else
         for (int64_t r = rect.r0; r <= rect.r1; ++r)
@@ -511,8 +516,8 @@ class TileTracer {
     /// Tests triangle i, whose depths lie within [near, far] (when known), on the block's
     /// ray at column c, row r; on a closer hit, the depth bounds of the ray and of its quad
     /// follow.
-    void try_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF) {
-        if (!test_pixel(c, r, i, near, far)) return;
+    void try_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF, bool sure = false) {
+        if (!test_pixel(c, r, i, near, far, sure)) return;
         const int64_t q = 2 * (c >> 1) + 2 * (r >> 1) * kStride;  // the quad's first pixel
         quad_[(c >> 1) + (r >> 1) * kQuads] = std::max(std::max(depth_bound_[q], depth_bound_[q + 1]),
                                                        std::max(depth_bound_[q + kStride], depth_bound_[q + kStride + 1]));
@@ -522,8 +527,8 @@ class TileTracer {
     /// depth bound follows and this returns true.
     ///
     /// A sure hit settles a pixel's triangle without its ray (with the watertight kernel in
-    /// double): the pixel's first
-    /// candidate, when the kernel surely hits it (ProjectedScene::surely_hit), is recorded
+    /// double): the pixel's first candidate, when the kernel surely hits it (`sure`, from
+    /// the footprint tests that found the pixel; ProjectedScene::SureHits), is recorded
     /// with its depth bounds, and no ray is made. A later candidate is culled when its
     /// nearest depth lies beyond the sure hit's farthest: each bound clears the exact depths
     /// by the depth slack plus 2^-21 relative, far beyond the kernel's rounding of t and its
@@ -532,13 +537,13 @@ class TileTracer {
     /// When the cast asks for the hit's depth or weights, the rays of the pixels still
     /// settled so are made once the tile is traversed, and tested on their sure hit alone
     /// (complete_sure_hits).
-    bool test_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF) {
+    bool test_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF, bool sure = false) {
         const int64_t j = c + r * kStride;
         const uint64_t bit = uint64_t(1) << c;
         bool resolved = false;  // a sure hit was just tested with the kernel
         if (!(made_[r] & bit)) {
 #if defined(__AVX2__)
-            if (sure_allowed_ && !(sure_bits_[r] & bit) && projected_.surely_hit(i, i0_ + c, r0_ + r, near, far, context_.cull_back_faces)) {
+            if (sure_allowed_ && sure && !(sure_bits_[r] & bit)) {
                 sure_bits_[r] |= bit;
                 sure_[j] = i;
                 depth_bound_[j] = double(far);
