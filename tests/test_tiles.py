@@ -114,6 +114,45 @@ def test_rays_through_vertices_and_edges(centre, pixel, n):
     assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam) == n * n
 
 
+def triangles_just_missing_pixel_centres(cam: vrc.Camera, gap: float, rng: np.random.Generator, spacing: int = 10) -> pv.PolyData:
+    """Lone triangles, one by every spacing-th pixel centre, each with an edge passing `gap`
+    pixels outside that centre at a random angle; their points lie at random depths on the
+    rays of non-integer pixel positions, which single precision rounds by far more than the
+    gap."""
+    points = []
+    for row in range(spacing // 2, cam.ny - spacing // 2, spacing):
+        for col in range(spacing // 2, cam.nx - spacing // 2, spacing):
+            theta = rng.uniform(0, 2 * np.pi)
+            u, n = np.array([np.cos(theta), np.sin(theta)]), np.array([-np.sin(theta), np.cos(theta)])
+            centre = np.array([col, row], float) + gap * n
+            a, b, c, h = rng.uniform(1.3, 3.7, 4)
+            for i, r in (centre + a * u, centre - b * u, centre + 0.3 * c * u + h * n):
+                # column i, row r (from the bottom) on the image plane, then at depth t
+                x = (cam.shift[0] - cam.w * 0.5) + cam.w / cam.nx * (i + 0.5)
+                y = (cam.shift[1] - cam.h * 0.5) + cam.h / cam.ny * (r + 0.5)
+                t = rng.uniform(2, 4)
+                if cam.parallel:
+                    points.append(cam.eye + x * cam.right + y * cam.up - t * cam.backward)
+                else:
+                    points.append(cam.eye + t * (x * cam.right + y * cam.up - cam.d * cam.backward))
+    faces = np.c_[np.full(len(points) // 3, 3), np.arange(len(points)).reshape(-1, 3)]
+    return pv.PolyData(np.array(points), faces=faces.ravel())
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+@pytest.mark.parametrize("offset", [0.0, 1234.567])
+def test_pixel_centres_just_outside_edges(parallel, offset):
+    # A tile settles a pixel without its ray when its centre lies inside a triangle's
+    # projection by more than every rounding (sure hits): here the exact rays pass a
+    # billionth of a pixel outside, within the single-precision rounding of the projected
+    # points, so a bound short of that rounding would claim hits the kernel does not find.
+    rng = np.random.default_rng(5)
+    eye, target = np.array([0.3, -0.2, 10.0]) + offset, np.full(3, offset)
+    cam = vrc.Camera(eye, target, (0.1, 1, 0), view_angle=40, nx=300, ny=260, parallel=parallel)
+    scene = vrc.Scene(triangles_just_missing_pixel_centres(cam, 1e-9, rng))
+    assert compare(scene, scene, cam) > 3000
+
+
 @pytest.mark.parametrize("culling", [False, True])
 @pytest.mark.parametrize("parallel", [False, True])
 def test_triangles_smaller_than_pixels(culling, parallel):
