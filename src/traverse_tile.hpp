@@ -452,7 +452,7 @@ class TileTracer {
                 const auto test = [&](int64_t c, int64_t r, unsigned sure) {
                     if (double(near[k]) > depth_bound_[c + r * kStride]) return;
                     if (!fetched) scene_.prefetch_points(triangle), fetched = true;  // (for the kernel)
-                    try_pixel(c, r, triangle, near[k], far[k], sure >> k & 1);
+                    try_pixel(c, r, triangle, far[k], sure >> k & 1);
                 };
                 if (on_first >> k & 1) test(rect[0][k], rect[2][k], sure_first);
                 if (on_last >> k & 1) test(rect[1][k], rect[3][k], sure_last);
@@ -496,7 +496,7 @@ class TileTracer {
                 const auto [may, sure] = footprint->may_cover8(i0_ + c, r0_ + r, either_side);
                 for (open &= may; open != 0; open &= open - 1) {
                     const int b = __builtin_ctz(open);
-                    try_pixel(c + b, r, i, float(rect.near), float(rect.far), sure_depths && (sure >> b & 1));
+                    try_pixel(c + b, r, i, float(rect.far), sure_depths && (sure >> b & 1));
                 }
             }
 #else
@@ -508,16 +508,16 @@ class TileTracer {
                     scene_.prefetch_points(i);  // for the kernel, while the footprint is set up
                     footprint.emplace(projected_.footprint(i));
                 }
-                if (footprint->may_cover(i0_ + c, r0_ + r)) try_pixel(c, r, i, float(rect.near), float(rect.far));
+                if (footprint->may_cover(i0_ + c, r0_ + r)) try_pixel(c, r, i, float(rect.far), false);
             }
 #endif
     }
 
-    /// Tests triangle i, whose depths lie within [near, far] (when known), on the block's
-    /// ray at column c, row r; on a closer hit, the depth bounds of the ray and of its quad
-    /// follow.
-    void try_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF, bool sure = false) {
-        if (!test_pixel(c, r, i, near, far, sure)) return;
+    /// Tests triangle i, whose depths lie below `far`, on the block's ray at column c, row
+    /// r (`sure`: surely hit, see test_pixel); on a closer hit, the depth bounds of the ray
+    /// and of its quad follow.
+    void try_pixel(int64_t c, int64_t r, uint32_t i, float far, bool sure) {
+        if (!test_pixel(c, r, i, far, sure)) return;
         const int64_t q = 2 * (c >> 1) + 2 * (r >> 1) * kStride;  // the quad's first pixel
         quad_[(c >> 1) + (r >> 1) * kQuads] = std::max(std::max(depth_bound_[q], depth_bound_[q + 1]),
                                                        std::max(depth_bound_[q + kStride], depth_bound_[q + kStride + 1]));
@@ -537,7 +537,7 @@ class TileTracer {
     /// When the cast asks for the hit's depth or weights, the rays of the pixels still
     /// settled so are made once the tile is traversed, and tested on their sure hit alone
     /// (complete_sure_hits).
-    bool test_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF, bool sure = false) {
+    bool test_pixel(int64_t c, int64_t r, uint32_t i, float far = HUGE_VALF, bool sure = false) {
         const int64_t j = c + r * kStride;
         const uint64_t bit = uint64_t(1) << c;
         bool resolved = false;  // a sure hit was just tested with the kernel
