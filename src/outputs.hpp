@@ -121,9 +121,15 @@ class OutputWriter {
     /// triangle index: scattered, mostly a miss).
     void prefetch(uint32_t prim) const { prefetch_line(scene_.prim_ids.data() + prim); }
 
-    /// Asks the cache for the rows of the point arrays the hits on triangles `prims` read
-    /// (scattered in the mesh's point order: the interpolation's loads stalled on them).
+    /// Asks the cache for the rows of the cell and point arrays the hits on triangles
+    /// `prims` read (scattered in the mesh's order: their copies and interpolations had
+    /// stalled on them).
     void prefetch_rows(const uint32_t* prims, std::size_t n) const {
+        if (!cell_fields_.empty())
+            for (std::size_t i = 0; i < n; ++i) {
+                const std::size_t row = cell_row(scene_.prim_ids[prims[i]]);
+                for (const auto& [f, copy] : cell_fields_) prefetch_line(static_cast<const char*>(f->values) + row * f->row_bytes);
+            }
         if (point_fields_.empty()) return;
         for (std::size_t i = 0; i < n; ++i)
             for (int c = 0; c < 3; ++c) {
@@ -183,10 +189,20 @@ class OutputWriter {
     [[gnu::always_inline]] void put(T* p, T v) const {
         streaming_ ? put_as<true>(p, v) : put_as<false>(p, v);
     }
+    /// Stores v at p .. p + n - 1; streaming, sixteen bytes at a time where aligned (a run
+    /// of misses is up to a tile's row: most of an empty frame's stores).
     template <class T>
     void put_n(T* p, std::size_t n, T v) const {
-        if (!streaming_) return void(std::fill_n(p, n, v));
-        for (std::size_t i = 0; i < n; ++i) put_as<true>(p + i, v);
+        if (!streaming_ || (sizeof(T) != 4 && sizeof(T) != 8)) return void(std::fill_n(p, n, v));
+        constexpr std::size_t kPerBlock = 16 / sizeof(T);
+        std::size_t i = 0;
+        for (; i < n && reinterpret_cast<std::uintptr_t>(p + i) % 16 != 0; ++i) put_as<true>(p + i, v);
+        T values[kPerBlock];
+        std::fill_n(values, kPerBlock, v);
+        __m128i block;
+        std::memcpy(&block, values, sizeof block);
+        for (; i + kPerBlock <= n; i += kPerBlock) _mm_stream_si128(reinterpret_cast<__m128i*>(p + i), block);
+        for (; i < n; ++i) put_as<true>(p + i, v);
     }
 
     /// Writes what triangle `prim` alone decides for ray k; returns its input index.
