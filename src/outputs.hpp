@@ -189,19 +189,26 @@ class OutputWriter {
     [[gnu::always_inline]] void put(T* p, T v) const {
         streaming_ ? put_as<true>(p, v) : put_as<false>(p, v);
     }
-    /// Stores v at p .. p + n - 1; streaming, sixteen bytes at a time where aligned (a run
-    /// of misses is up to a tile's row: most of an empty frame's stores).
+    /// Stores v at p .. p + n - 1; streaming, a vector register at a time where aligned (a
+    /// run of misses is up to a tile's row: most of an empty frame's stores).
     template <class T>
     void put_n(T* p, std::size_t n, T v) const {
         if (!streaming_ || (sizeof(T) != 4 && sizeof(T) != 8)) return void(std::fill_n(p, n, v));
-        constexpr std::size_t kPerBlock = 16 / sizeof(T);
+#if defined(__AVX__)
+        using Block = __m256i;
+        const auto stream = [](T* at, Block b) { _mm256_stream_si256(reinterpret_cast<Block*>(at), b); };
+#else
+        using Block = __m128i;
+        const auto stream = [](T* at, Block b) { _mm_stream_si128(reinterpret_cast<Block*>(at), b); };
+#endif
+        constexpr std::size_t kPerBlock = sizeof(Block) / sizeof(T);
         std::size_t i = 0;
-        for (; i < n && reinterpret_cast<std::uintptr_t>(p + i) % 16 != 0; ++i) put_as<true>(p + i, v);
+        for (; i < n && reinterpret_cast<std::uintptr_t>(p + i) % sizeof(Block) != 0; ++i) put_as<true>(p + i, v);
         T values[kPerBlock];
         std::fill_n(values, kPerBlock, v);
-        __m128i block;
+        Block block;
         std::memcpy(&block, values, sizeof block);
-        for (; i + kPerBlock <= n; i += kPerBlock) _mm_stream_si128(reinterpret_cast<__m128i*>(p + i), block);
+        for (; i + kPerBlock <= n; i += kPerBlock) stream(p + i, block);
         for (; i < n; ++i) put_as<true>(p + i, v);
     }
 
