@@ -114,7 +114,9 @@ def test_rays_through_vertices_and_edges(centre, pixel, n):
     assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam) == n * n
 
 
-def triangles_just_missing_pixel_centres(cam: vrc.Camera, gap: float, rng: np.random.Generator, spacing: int = 10) -> pv.PolyData:
+def triangles_just_missing_pixel_centres(
+    cam: vrc.Camera, gap: float, rng: np.random.Generator, spacing: int = 10
+) -> pv.PolyData:
     """Lone triangles, one by every spacing-th pixel centre, each with an edge passing `gap`
     pixels outside that centre at a random angle; their points lie at random depths on the
     rays of non-integer pixel positions, which single precision rounds by far more than the
