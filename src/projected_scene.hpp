@@ -322,16 +322,16 @@ class ProjectedScene {
     /// For the edge from A to B, E(p) = (B - A) x (p - A) differs from the exact E'(p*) =
     /// (B' - A') x (p* - A') by (B - A) x (p* - p - A' + A) + (B' - B - A' + A) x (p - A) +
     /// the product of the two perturbations: at most M |B - A| + 2M |p - A| + 4M^2 (|.| the
-    /// 1-norm). Evaluated in single precision from the stored floats, E carries the
-    /// footprint's rounding, which its slack bounds with M |B - A|; a pixel centre of the
-    /// triangle's rectangle lies within the width plus height of the points' box plus one
-    /// of A (and any point) in the 1-norm. When all three edges clear
+    /// 1-norm). A pixel centre of the triangle's rectangle lies within the width plus height
+    /// of the points' box plus twice the margin of A (and of any point) in the 1-norm, and E,
+    /// evaluated in single precision from the stored floats, carries a rounding bounded
+    /// with those (Footprint::sure_slack adds both). When all three edges clear
     /// that bound with one sign, every exact edge function at p* has that sign: the exact ray
     /// passes strictly inside the exact triangle (a central or parallel projection keeps the
     /// sign of det[A - O, B - O, d] for points in front). The kernel's edge functions take
     /// their exact signs (Watertight::exact_if_close), so it hits; and its t lies within the
     /// ray's range when the depths clear the camera's [near, far] (sure_near_, sure_far_).
-    /// `front_only` (back-face culling): only when the edges are all positive. Columns grow
+    /// With back-face culling (not `either_side`): only when the edges are all positive. Columns grow
     /// to the right and rows upwards as the eye sees them, and a central or parallel
     /// projection keeps the orientation of points in front, so their sum, the projected
     /// (B - A) x (C - A), is then positive: the triangle's right-hand normal points at the
