@@ -47,6 +47,10 @@ struct CameraTree {
     /// leaf_offsets[i + 1]) (none for an inner node). A camera cast frames a leaf from them:
     /// 1.3 M of the triangles' 4.5 M point references on the frog contour.
     std::vector<uint32_t> leaf_offsets, leaf_points;
+    /// Per node, 1 + the largest point index its triangles and all before them use: points
+    /// are numbered by first use, so a run of nodes first uses points [the previous node's
+    /// point_end, its last node's point_end). A cast projects and frames a run at a time.
+    std::vector<uint32_t> point_end;
 };
 
 /// Triangles, in BVH leaf order, and the hierarchy over them. Owns copies of its input so
@@ -91,7 +95,8 @@ struct Scene {
         return points.size() * sizeof(double) + triangles.size() * sizeof(uint32_t) +
                (prim_ids.size() + point_ids.size()) * sizeof(uint32_t) + nodes.size() * sizeof(Node) +
                camera.nodes.size() * sizeof(CameraTree::Link) + wide.size() * sizeof(WideNode) +
-               (camera.leaf_offsets.size() + camera.leaf_points.size()) * sizeof(uint32_t) + scratch->bytes();
+               (camera.leaf_offsets.size() + camera.leaf_points.size() + camera.point_end.size()) * sizeof(uint32_t) +
+               scratch->bytes();
     }
 };
 

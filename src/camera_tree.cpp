@@ -1,5 +1,6 @@
 // The camera tree (bvh.hpp): the BVH with its small subtrees collapsed into leaves, and
 // each leaf's points.
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -69,6 +70,20 @@ void build_camera_tree(Scene& scene) {
     }
     tree.leaf_offsets.back() = uint32_t(list.size());
     shrink_huge(list);
+
+    // point_end: over the triangles up to each leaf's last, then each inner node's from its
+    // children (the right child's range ends later)
+    const std::size_t n_triangles = scene.triangles.size() / 3;
+    std::vector<uint32_t> prefix(n_triangles + 1, 0);
+    for (std::size_t t = 0; t < n_triangles; ++t) {
+        const uint32_t* tri = scene.triangles.data() + 3 * t;
+        prefix[t + 1] = std::max({prefix[t], tri[0] + 1, tri[1] + 1, tri[2] + 1});
+    }
+    tree.point_end.resize(tree.nodes.size());
+    for (std::size_t i = tree.nodes.size(); i-- > 0;) {  // children follow their parent
+        const CameraTree::Link& node = tree.nodes[i];
+        tree.point_end[i] = node.count != 0 ? prefix[node.index + node.count] : std::max(tree.point_end[node.index], tree.point_end[node.index + 1]);
+    }
 }
 
 }  // namespace vrc

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <thread>
 #include <utility>
 #include <vector>
 #if defined(__SSE4_1__)
@@ -257,13 +258,25 @@ class ProjectedScene {
         for (std::size_t k; (k = next_run_.fetch_add(1)) * kRun < n;) project(k * kRun, std::min(n, (k + 1) * kRun));
     }
 
-    /// Through a BVH, once every point is projected, the node rectangles: whole subtrees
-    /// (`frame_subtrees`, called by every worker: each takes subtrees until none is left),
-    /// then the few nodes above them (`frame_top`, one worker). In a subtree the leaves go
-    /// first, then the inner nodes from last to first, as every node's children follow it.
-    void frame_subtrees() {
+    /// Through a BVH, the points and the node rectangles: whole subtrees (called by every
+    /// worker: each takes subtrees in the triangles' order until none is left), then the few
+    /// nodes above them (`frame_top`, one worker, once every worker is done). A subtree's
+    /// points (those its triangles use first, CameraTree::point_end) are projected, then,
+    /// once the subtrees before it have projected theirs (its leaves also use some of
+    /// those), its leaves are framed from them while they are still in cache, then its inner
+    /// nodes from last to first, as every node's children follow it.
+    void project_and_frame() {
+        std::size_t before = 0;  // subtrees this worker knows projected (a prefix)
         for (std::size_t k; (k = next_subtree_.fetch_add(1)) < subtrees_.size();) {
             const Subtree& t = subtrees_[k];
+            project(k == 0 ? 0 : scene_.camera.point_end[subtrees_[k - 1].root], scene_.camera.point_end[t.root]);
+            projected_[k].store(true, std::memory_order_release);
+            while (before < k) {
+                if (projected_[before].load(std::memory_order_acquire))
+                    ++before;
+                else
+                    std::this_thread::yield();
+            }
             for (uint32_t i = t.first; i < t.end; ++i)
                 if (node_[i].count != 0) frame_leaf(i);
             for (uint32_t i = t.end; i-- > t.first;)
@@ -689,8 +702,14 @@ class ProjectedScene {
             subtrees_.push_back(subtree(left + 1));
             std::push_heap(subtrees_.begin(), subtrees_.end(), smaller);
         }
-        std::sort_heap(subtrees_.begin(), subtrees_.end(), smaller);
-        std::reverse(subtrees_.begin(), subtrees_.end());  // largest first
+        // in the triangles' order (a subtree's first is its leftmost leaf's)
+        const auto first_triangle = [this](const Subtree& t) {
+            uint32_t i = t.root;
+            while (scene_.camera.nodes[i].count == 0) i = scene_.camera.nodes[i].index;
+            return scene_.camera.nodes[i].index;
+        };
+        std::sort(subtrees_.begin(), subtrees_.end(), [&](const Subtree& a, const Subtree& b) { return first_triangle(a) < first_triangle(b); });
+        projected_ = std::make_unique<std::atomic<bool>[]>(subtrees_.size());
     }
 
     const Scene& scene_;
@@ -711,6 +730,7 @@ class ProjectedScene {
     std::vector<Subtree> subtrees_;
     std::vector<uint32_t> top_;
     std::atomic<std::size_t> next_subtree_{0};
+    std::unique_ptr<std::atomic<bool>[]> projected_;  // per subtree, whether its points are projected
     static constexpr std::size_t kRun = 1 << 14;  // points a worker projects at a time (a multiple of 4)
     std::atomic<std::size_t> next_run_{0};
 #if defined(__SSE4_1__)

@@ -85,15 +85,15 @@ struct CameraCast {
     /// when no pixel may see the scene: every tile is then a miss.
     std::vector<uint32_t> prepare(unsigned w, unsigned workers, const CameraRays& rays) {
         if (!rays.may_hit()) return {};
-        projected.project();
-        barrier.wait();
         if (!bins) {
-            projected.frame_subtrees();
+            projected.project_and_frame();
             barrier.wait();
             if (w == 0) projected.frame_top();
             barrier.wait();
             return {};
         }
+        projected.project();
+        barrier.wait();
         bins->bin(w);
         barrier.wait();
         return bins->unknown();
