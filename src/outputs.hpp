@@ -122,8 +122,8 @@ class OutputWriter {
     void prefetch(uint32_t prim) const { prefetch_line(scene_.prim_ids.data() + prim); }
 
     /// Asks the cache for the rows of the cell and point arrays the hits on triangles
-    /// `prims` read (scattered in the mesh's order: their copies and interpolations had
-    /// stalled on them).
+    /// `prims` read: they lie scattered in the mesh's order, and the copies and
+    /// interpolations would each wait on their own.
     void prefetch_rows(const uint32_t* prims, std::size_t n) const {
         if (!cell_fields_.empty())
             for (std::size_t i = 0; i < n; ++i) {

@@ -353,7 +353,6 @@ class ProjectedScene {
     /// M less the points' storage rounding (see SureHits), rounded up to single precision.
     [[nodiscard]] float sure_margin() const { return sure_margin_; }
 
-
     /// Through a BVH, triangle i's rectangle (leaf order).
     [[nodiscard]] ImageRect triangle(uint32_t i) const {
         ImageRect rect;
