@@ -21,6 +21,9 @@ namespace vrc {
 /// or all three vertices' depths along the ray beyond [tmin, bound] by far more than any
 /// kernel's rounding of t (relative 2^-9). Everything else, hits and
 /// near-misses alike, goes on to the kernel, so results are the kernel's, bit for bit.
+/// In double, not in eight float lanes: the bound grows with a triangle's distance from the
+/// ray's origin (the sheared coordinates' magnitudes), and in single precision it lets
+/// through most of a large mesh's small, distant triangles.
 #if defined(__AVX__)
 class TriangleFilter {
    public:
