@@ -113,12 +113,26 @@ def select_arrays(found: MeshArrays, arrays: Iterable[str] | str | None, interpo
     return names
 
 
+def _geometry_layout(name: str, real: type) -> tuple[np.dtype, tuple[int, ...]]:
+    ids = name.endswith("Id") or name == "CompositeIndex"
+    dtype = np.uint8 if name == "vtkValidPointMask" else (np.int64 if ids else real)
+    return np.dtype(dtype), _GEOMETRY[name][1]
+
+
+#: The geometry arrays' layouts by (name, precision), made once: a batch of a few rays
+#: otherwise spent a tenth of its call making them again.
+_GEOMETRY_LAYOUTS = {
+    (name, real): _geometry_layout(name, real) for name in _GEOMETRY for real in (np.float32, np.float64)
+}
+
+
 def row_layout(found: MeshArrays, name: str, real: type) -> tuple[np.dtype, tuple[int, ...]]:
     """Element type and row shape of output array ``name``."""
+    layout = _GEOMETRY_LAYOUTS.get((name, real))
+    if layout is not None:
+        return layout
     if name in _GEOMETRY:
-        ids = name.endswith("Id") or name == "CompositeIndex"
-        dtype = np.uint8 if name == "vtkValidPointMask" else (np.int64 if ids else real)
-        return np.dtype(dtype), _GEOMETRY[name][1]
+        return _geometry_layout(name, real)
     values = found.point.get(name)
     values = found.cell[name] if values is None else values
     return values.dtype, values.shape[1:]

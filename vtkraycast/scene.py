@@ -979,7 +979,7 @@ def _along(names: list[str]) -> list[str]:
 
 
 def _batched(values: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    return values.reshape(shape + values.shape[1:])
+    return values if values.shape[:1] == shape else values.reshape(shape + values.shape[1:])
 
 
 @contextmanager
