@@ -228,10 +228,10 @@ class ProjectedScene {
         // that can fall in the image: one farther out clamps to the border whatever its
         // rounding. Rounded up to single precision, as is twice the depth slack (at least
         // the smallest normal float, which covers a subnormal depth's rounding).
-        projection_margin_ = map_.margin + (c.parallel ? 16 * kEps * parallel_size : 0);
-        const double margin = projection_margin_ + 0x1p-21 * double(std::max(c.nx, c.ny) + 2);
+        const double projection_margin = map_.margin + (c.parallel ? 16 * kEps * parallel_size : 0);
+        const double margin = projection_margin + 0x1p-21 * double(std::max(c.nx, c.ny) + 2);
         margin_ = round_up(margin);
-        sure_margin_ = round_up(projection_margin_);
+        sure_margin_ = round_up(projection_margin);  // (the projection's own margin, without the storage's)
         slack_ = std::max(round_up(2 * depth_slack_), std::numeric_limits<float>::min());
         near_ = -round_up(-c.near), far_ = round_up(c.far);  // rounded outward
         // A triangle's depths must clear the camera's range by more than the kernel's and
@@ -720,7 +720,6 @@ class ProjectedScene {
     double to_anchor_[3], reach_[3], depth_slack_;
     float margin_, slack_, near_, far_;  // in single precision: see the constructor
     float sure_near_, sure_far_, sure_margin_;  // see SureHits
-    double projection_margin_;           // the projection's own margin (in margin_, with the storage's)
     /// A subtree: its root, then its other nodes [first, end) (empty for a leaf).
     struct Subtree {
         uint32_t root, first, end;

@@ -130,13 +130,12 @@ def triangles_just_missing_pixel_centres(
             a, b, c, h = rng.uniform(1.3, 3.7, 4)
             for i, r in (centre + a * u, centre - b * u, centre + 0.3 * c * u + h * n):
                 # column i, row r (from the bottom) on the image plane, then at depth t
-                x = (cam.shift[0] - cam.w * 0.5) + cam.w / cam.nx * (i + 0.5)
-                y = (cam.shift[1] - cam.h * 0.5) + cam.h / cam.ny * (r + 0.5)
+                x, y, z = cam.pixel_center(i, cam.ny - 1 - r)
                 t = rng.uniform(2, 4)
                 if cam.parallel:
                     points.append(cam.eye + x * cam.right + y * cam.up - t * cam.backward)
                 else:
-                    points.append(cam.eye + t * (x * cam.right + y * cam.up - cam.d * cam.backward))
+                    points.append(cam.eye + t * (x * cam.right + y * cam.up + z * cam.backward))
     faces = np.c_[np.full(len(points) // 3, 3), np.arange(len(points)).reshape(-1, 3)]
     return pv.PolyData(np.array(points), faces=faces.ravel())
 
