@@ -426,13 +426,17 @@ class ProjectedScene {
         return r;
     }
     /// Footprint's test and the sure-hit test (see SureHits) of the eight triangles of `q`
-    /// on the rays of their pixels at (col0, row0) and at (col1, row1): which lanes may be
-    /// hit there (`may`), and which surely are (`sure`; the positive side only unless
-    /// `either_side`). Footprint's operations on the same floats, eight triangles at once.
+    /// on the rays of kPixels pixels each, lane k's p-th at (col[p], row[p]): which lanes
+    /// may be hit there (`may[p]`), and which surely are (`sure[p]`; the positive side only
+    /// unless `either_side`). Footprint's operations on the same floats, eight triangles
+    /// at once.
+    template <int kPixels>
     struct Cover8 {
-        __m256 may[2], sure[2];
+        __m256 may[kPixels], sure[kPixels];
     };
-    [[nodiscard]] Cover8 cover8(const Rects8& q, __m256 col0, __m256 row0, __m256 col1, __m256 row1, bool either_side) const {
+    template <int kPixels>
+    [[nodiscard]] Cover8<kPixels> cover8(const Rects8& q, const __m256 col[kPixels], const __m256 row[kPixels],
+                                         bool either_side) const {
         const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(INT32_MAX));
         const auto abs = [&](__m256 v) { return _mm256_and_ps(v, abs_mask); };
         __m256 size = _mm256_setzero_ps();
@@ -448,14 +452,14 @@ class ProjectedScene {
         const __m256 sure_m = _mm256_add_ps(_mm256_set1_ps(sure_margin_), _mm256_mul_ps(_mm256_set1_ps(0x1p-23f), size));
         const __m256 reach = _mm256_add_ps(_mm256_add_ps(extent(q.x), extent(q.y)), _mm256_add_ps(margin, margin));
         const __m256 all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
-        __m256 below[2] = {}, above[2] = {}, positive[2] = {all, all}, negative[2] = {all, all};
+        __m256 below[kPixels], above[kPixels], positive[kPixels], negative[kPixels];
+        for (int p = 0; p < kPixels; ++p) below[p] = above[p] = _mm256_setzero_ps(), positive[p] = negative[p] = all;
         for (int k = 0; k < 3; ++k) {
             const __m256 ex = _mm256_sub_ps(q.x[(k + 1) % 3], q.x[k]), ey = _mm256_sub_ps(q.y[(k + 1) % 3], q.y[k]);
             const __m256 slack = _mm256_add_ps(_mm256_mul_ps(m, _mm256_add_ps(abs(ex), abs(ey))), _mm256_set1_ps(0x1p-120f));
             const __m256 minus_slack = _mm256_xor_ps(slack, _mm256_set1_ps(-0.0f));
             const __m256 sure = Footprint::sure_slack(_mm256_add_ps(abs(ex), abs(ey)), sure_m, reach), minus_sure = _mm256_xor_ps(sure, _mm256_set1_ps(-0.0f));
-            const __m256 col[2] = {col0, col1}, row[2] = {row0, row1};
-            for (int p = 0; p < 2; ++p) {
+            for (int p = 0; p < kPixels; ++p) {
                 const __m256 e = _mm256_sub_ps(_mm256_mul_ps(ex, _mm256_sub_ps(row[p], q.y[k])), _mm256_mul_ps(ey, _mm256_sub_ps(col[p], q.x[k])));
                 below[p] = _mm256_or_ps(below[p], _mm256_cmp_ps(e, minus_slack, _CMP_LT_OQ));
                 above[p] = _mm256_or_ps(above[p], _mm256_cmp_ps(e, slack, _CMP_GT_OQ));
@@ -465,8 +469,8 @@ class ProjectedScene {
         }
         const __m256 possible = _mm256_andnot_ps(q.unknown, _mm256_and_ps(_mm256_cmp_ps(q.near, _mm256_set1_ps(sure_near_), _CMP_GT_OQ),
                                                                           _mm256_cmp_ps(q.far, _mm256_set1_ps(sure_far_), _CMP_LT_OQ)));
-        Cover8 c;
-        for (int p = 0; p < 2; ++p) {
+        Cover8<kPixels> c;
+        for (int p = 0; p < kPixels; ++p) {
             c.may[p] = _mm256_or_ps(q.unknown, _mm256_andnot_ps(_mm256_and_ps(below[p], above[p]), all));
             c.sure[p] = _mm256_and_ps(possible, either_side ? _mm256_or_ps(positive[p], negative[p]) : positive[p]);
         }

@@ -408,9 +408,10 @@ class TileTracer {
     /// their rectangles cover.
     void test_leaf(const CameraRays::TilePixels& packet, uint32_t first, uint32_t count) {
 #if defined(__AVX2__)
-        // Eight triangles at a time: their rectangles, then those on one or two pixels of
-        // the packet (two thirds of the frog's on one) through Footprint's test there, all
-        // at once; the others go pixel by pixel through test_pixels.
+        // Eight triangles at a time: their rectangles, then those on at most four pixels of
+        // the packet (nearly all of a framed frog's, two thirds of a terrain's filling the
+        // frame) through Footprint's test there, all at once; the others go pixel by pixel
+        // through test_pixels.
         const __m256 i0 = _mm256_set1_ps(float(packet.i0)), i1 = _mm256_set1_ps(float(packet.i1)),
                      r0 = _mm256_set1_ps(float(packet.r0)), r1 = _mm256_set1_ps(float(packet.r1));
         for (uint32_t i = first, end = first + count; i < end; i += 8) {
@@ -422,40 +423,71 @@ class TileTracer {
             // the part within the packet
             const __m256 c0 = _mm256_max_ps(q.c0, i0), c1 = _mm256_min_ps(q.c1, i1), rr0 = _mm256_max_ps(q.r0, r0),
                          rr1 = _mm256_min_ps(q.r1, r1);
-            // on one pixel, or two (side by side or one above the other): Footprint's test on
-            // the first and on the last, all at once
-            const __m256 spread = _mm256_add_ps(_mm256_sub_ps(c1, c0), _mm256_sub_ps(rr1, rr0));
-            const unsigned single = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, _mm256_setzero_ps(), _CMP_EQ_OQ)));
-            const unsigned pair = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, _mm256_set1_ps(1), _CMP_EQ_OQ)));
-            const ProjectedScene::Cover8 cover = projected_.cover8(q, c0, rr0, c1, rr1, !context_.cull_back_faces);
-            const unsigned first_ok = unsigned(_mm256_movemask_ps(cover.may[0])), last_ok = unsigned(_mm256_movemask_ps(cover.may[1]));
-            const unsigned sure_first = unsigned(_mm256_movemask_ps(cover.sure[0])), sure_last = unsigned(_mm256_movemask_ps(cover.sure[1]));
-            alignas(32) int32_t rect[4][8];  // in the block's coordinates
-            alignas(32) float near[8], far[8];
+            // On at most four pixels (one; two side by side or one above the other; a row or a
+            // column of three or four; a square of four): Footprint's test on each, all at
+            // once. Lane k's pixels: its rectangle's first and last corners, then the others.
+            const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1);
+            const __m256 wide = _mm256_sub_ps(c1, c0), tall = _mm256_sub_ps(rr1, rr0), spread = _mm256_add_ps(wide, tall);
+            const __m256 line = _mm256_cmp_ps(_mm256_min_ps(wide, tall), zero, _CMP_EQ_OQ);
+            const __m256 square = _mm256_andnot_ps(line, _mm256_cmp_ps(spread, _mm256_set1_ps(2), _CMP_EQ_OQ));
+            const __m256 line4 = _mm256_and_ps(line, _mm256_cmp_ps(spread, _mm256_set1_ps(3), _CMP_EQ_OQ));
+            const unsigned single = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, zero, _CMP_EQ_OQ)));
+            const unsigned pair = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(spread, one, _CMP_EQ_OQ)));
+            const unsigned four = unsigned(_mm256_movemask_ps(_mm256_or_ps(square, line4)));
+            const unsigned more = four | (unsigned(_mm256_movemask_ps(_mm256_and_ps(line, _mm256_cmp_ps(spread, _mm256_set1_ps(2), _CMP_EQ_OQ)))));
+            const unsigned small = single | pair | more;
+            __m256 cols[4] = {c0, c1}, rows[4] = {rr0, rr1};
+            unsigned may[4] = {}, sure[4] = {};
+            const auto cover = [&](auto pixels) {
+                constexpr int kPixels = decltype(pixels)::value;
+                const auto c = projected_.cover8<kPixels>(q, cols, rows, !context_.cull_back_faces);
+                for (int p = 0; p < kPixels; ++p)
+                    may[p] = unsigned(_mm256_movemask_ps(c.may[p])), sure[p] = unsigned(_mm256_movemask_ps(c.sure[p]));
+            };
+            alignas(32) int32_t at[4][2][8];  // pixel p of each lane (column, row), in the block's coordinates
             const __m256 to_c = _mm256_set1_ps(float(i0_)), to_r = _mm256_set1_ps(float(r0_));
-            _mm256_store_si256(reinterpret_cast<__m256i*>(rect[0]), _mm256_cvtps_epi32(_mm256_sub_ps(c0, to_c)));
-            _mm256_store_si256(reinterpret_cast<__m256i*>(rect[1]), _mm256_cvtps_epi32(_mm256_sub_ps(c1, to_c)));
-            _mm256_store_si256(reinterpret_cast<__m256i*>(rect[2]), _mm256_cvtps_epi32(_mm256_sub_ps(rr0, to_r)));
-            _mm256_store_si256(reinterpret_cast<__m256i*>(rect[3]), _mm256_cvtps_epi32(_mm256_sub_ps(rr1, to_r)));
+            const auto place = [&](int p) {
+                _mm256_store_si256(reinterpret_cast<__m256i*>(at[p][0]), _mm256_cvtps_epi32(_mm256_sub_ps(cols[p], to_c)));
+                _mm256_store_si256(reinterpret_cast<__m256i*>(at[p][1]), _mm256_cvtps_epi32(_mm256_sub_ps(rows[p], to_r)));
+            };
+            if (lanes & more) {  // a square's other two corners; a line's inner pixels
+                const __m256 step_c = _mm256_min_ps(wide, one), step_r = _mm256_min_ps(tall, one);
+                cols[2] = _mm256_blendv_ps(_mm256_add_ps(c0, step_c), c1, square);
+                rows[2] = _mm256_blendv_ps(_mm256_add_ps(rr0, step_r), rr0, square);
+                cols[3] = _mm256_blendv_ps(_mm256_add_ps(c0, _mm256_add_ps(step_c, step_c)), c0, square);
+                rows[3] = _mm256_blendv_ps(_mm256_add_ps(rr0, _mm256_add_ps(step_r, step_r)), rr1, square);
+                cover(std::integral_constant<int, 4>{});
+                place(2), place(3);
+            } else {
+                cover(std::integral_constant<int, 2>{});
+            }
+            place(0), place(1);
+            alignas(32) float near[8], far[8];
             _mm256_store_ps(near, q.near);
             _mm256_store_ps(far, q.far);
             // (lanes whose footprint misses their pixels are dropped here, not branched on)
-            const unsigned on_first = lanes & (single | pair) & first_ok, on_last = lanes & pair & last_ok;
-            for (lanes = (lanes & ~(single | pair)) | on_first | on_last; lanes != 0; lanes &= lanes - 1) {
+            const unsigned on[4] = {lanes & small & may[0], lanes & (pair | more) & may[1], lanes & more & may[2],
+                                    lanes & four & may[3]};
+            for (lanes = (lanes & ~small) | on[0] | on[1] | on[2] | on[3]; lanes != 0; lanes &= lanes - 1) {
                 const int k = __builtin_ctz(lanes);
                 const uint32_t triangle = i + uint32_t(k);
-                if (!((single | pair) >> k & 1)) {
-                    test_pixels(triangle, {rect[0][k], rect[1][k], rect[2][k], rect[3][k], near[k], far[k]});
+                if (!(small >> k & 1)) {
+                    test_pixels(triangle, {at[0][0][k], at[1][0][k], at[0][1][k], at[1][1][k], near[k], far[k]});
                     continue;
                 }
                 bool fetched = false;
-                const auto test = [&](int64_t c, int64_t r, unsigned sure) {
+                const auto test = [&](int p) {
+                    const int64_t c = at[p][0][k], r = at[p][1][k];
                     if (double(near[k]) > depth_bound_[c + r * kStride]) return;
                     if (!fetched) scene_.prefetch_points(triangle), fetched = true;  // (for the kernel)
-                    try_pixel(c, r, triangle, far[k], sure >> k & 1);
+                    try_pixel(c, r, triangle, far[k], sure[p] >> k & 1);
                 };
-                if (on_first >> k & 1) test(rect[0][k], rect[2][k], sure_first);
-                if (on_last >> k & 1) test(rect[1][k], rect[3][k], sure_last);
+                if (on[0] >> k & 1) test(0);
+                if (on[1] >> k & 1) test(1);
+                if (more >> k & 1) {
+                    if (on[2] >> k & 1) test(2);
+                    if (on[3] >> k & 1) test(3);
+                }
             }
         }
 #else
