@@ -164,6 +164,17 @@ def test_triangles_smaller_than_pixels(culling, parallel):
     assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam, backface_culling=culling) > 1000
 
 
+@pytest.mark.parametrize("culling", [False, True])
+@pytest.mark.parametrize("parallel", [False, True])
+def test_triangles_on_a_few_pixels(culling, parallel):
+    # 10 k triangles facing the eye over 33 k pixels: their rectangles hold one to a dozen
+    # pixel centres (a leaf's triangles on up to four are tested eight at a time, the rest
+    # pixel row by pixel row), many across the 64-pixel tiles' borders.
+    mesh = bumpy_sphere(5)
+    cam = around(mesh, parallel=parallel, nx=400, ny=376)
+    assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam, backface_culling=culling) > 25000
+
+
 @pytest.mark.parametrize("precision", ["float64", "float32"])
 def test_grazing_rays(precision):
     """A camera just above a tilted plane, looking along it: its rays dip 0.05 to 0.4
