@@ -156,23 +156,23 @@ def test_pixel_centres_just_outside_edges(parallel, offset):
 
 @pytest.mark.parametrize("culling", [False, True])
 @pytest.mark.parametrize("parallel", [False, True])
-def test_triangles_smaller_than_pixels(culling, parallel):
-    # 330 k triangles, front and back, a few per pixel: a flat scene bins them pixel by
-    # pixel, and each pixel first tests the nearest triangle that seems to cover it.
-    mesh = bumpy_sphere(7)
-    cam = around(mesh, parallel=parallel, nx=96, ny=80)
-    assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam, backface_culling=culling) > 1000
-
-
-@pytest.mark.parametrize("culling", [False, True])
-@pytest.mark.parametrize("parallel", [False, True])
-def test_triangles_on_a_few_pixels(culling, parallel):
-    # 10 k triangles facing the eye over 33 k pixels: their rectangles hold one to a dozen
-    # pixel centres (a leaf's triangles on up to four are tested eight at a time, the rest
-    # pixel row by pixel row), many across the 64-pixel tiles' borders.
-    mesh = bumpy_sphere(5)
-    cam = around(mesh, parallel=parallel, nx=400, ny=376)
-    assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam, backface_culling=culling) > 25000
+@pytest.mark.parametrize(
+    ("subdivisions", "nx", "ny", "least_hits"),
+    [
+        # 330 k triangles, front and back, a few per pixel: a flat scene bins them pixel by
+        # pixel, and each pixel first tests the nearest triangle that seems to cover it.
+        (7, 96, 80, 1000),
+        # 10 k triangles facing the eye over 33 k pixels: their rectangles hold one to a
+        # dozen pixel centres (a leaf's triangles on up to four are tested eight at a time,
+        # the rest pixel row by pixel row), many across the 64-pixel tiles' borders.
+        (5, 400, 376, 25000),
+    ],
+    ids=["smaller than pixels", "on a few pixels"],
+)
+def test_triangles_near_pixel_size(subdivisions, nx, ny, least_hits, culling, parallel):
+    mesh = bumpy_sphere(subdivisions)
+    cam = around(mesh, parallel=parallel, nx=nx, ny=ny)
+    assert assert_same_as_ray_by_ray(vrc.Scene(mesh), cam, backface_culling=culling) > least_hits
 
 
 @pytest.mark.parametrize("precision", ["float64", "float32"])

@@ -127,12 +127,10 @@ _GEOMETRY_LAYOUTS = {
 
 
 def row_layout(found: MeshArrays, name: str, real: type) -> tuple[np.dtype, tuple[int, ...]]:
-    """Element type and row shape of output array ``name``."""
+    """Element type and row shape of output array ``name`` (``real``: a PRECISIONS type)."""
     layout = _GEOMETRY_LAYOUTS.get((name, real))
     if layout is not None:
         return layout
-    if name in _GEOMETRY:
-        return _geometry_layout(name, real)
     values = found.point.get(name)
     values = found.cell[name] if values is None else values
     return values.dtype, values.shape[1:]
