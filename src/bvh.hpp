@@ -51,6 +51,19 @@ struct CameraTree {
     /// are numbered by first use, so a run of nodes first uses points [the previous node's
     /// point_end, its last node's point_end). A cast projects and frames a run at a time.
     std::vector<uint32_t> point_end;
+    /// The tree cut into subtrees, in the triangles' order, that a cast's workers project
+    /// and frame one at a time (ProjectedScene::project_and_frame); `top` holds the nodes
+    /// above them, parents before children. A camera that cannot see a subtree's box frames
+    /// none of its nodes and projects, of the points it uses first, only those that later
+    /// subtrees' leaves also use (`shared`).
+    struct Subtree {
+        uint32_t root, first, end;          ///< its root, then its other nodes [first, end) (none for a leaf)
+        uint32_t shared_begin, shared_end;  ///< shared[shared_begin, shared_end): see above
+        Box box;                            ///< around its triangles, relative to the scene's anchor
+    };
+    static constexpr std::size_t kSubtrees = 64;  // enough to balance a few dozen workers
+    std::vector<Subtree> subtrees;
+    std::vector<uint32_t> top, shared;
 };
 
 /// Triangles, in BVH leaf order, and the hierarchy over them. Owns copies of its input so
@@ -96,7 +109,8 @@ struct Scene {
                (prim_ids.size() + point_ids.size()) * sizeof(uint32_t) + nodes.size() * sizeof(Node) +
                camera.nodes.size() * sizeof(CameraTree::Link) + wide.size() * sizeof(WideNode) +
                (camera.leaf_offsets.size() + camera.leaf_points.size() + camera.point_end.size()) * sizeof(uint32_t) +
-               scratch->bytes();
+               camera.subtrees.size() * sizeof(CameraTree::Subtree) +
+               (camera.top.size() + camera.shared.size()) * sizeof(uint32_t) + scratch->bytes();
     }
 };
 

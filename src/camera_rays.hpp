@@ -181,13 +181,36 @@ class CameraRays {
     [[nodiscard]] const CameraSpec& spec() const { return c_; }
 
     /// The seed's bounding-volume test, per tile: project the scene's box (given relative to
-    /// `anchor`) into the image and keep the pixel rectangle that can see it (a pixel of
-    /// margin covers rounding). Tiles outside it are misses without traversal. A box wholly
-    /// outside the depth range (behind the eye, say) leaves no tile; one reaching behind a
-    /// pinhole eye's plane cannot be projected: then every tile stays.
-    void restrict_to(const Box& box, const double anchor[3]) {
-        const auto none = [this] { i_lo_ = r_lo_ = INT64_MAX / 2, i_hi_ = r_hi_ = INT64_MIN / 2; };  // meets no tile
-        if (!(box.lo[0] <= box.hi[0])) return none();  // empty scene: nothing can be hit
+    /// `anchor`) into the image and keep the pixel rectangle that can see it (span). Tiles
+    /// outside it are misses without traversal.
+    void restrict_to(const Box& box, const double anchor[3]) { span_ = span(box, anchor); }
+
+    /// Whether any pixel may see into a box (relative to `anchor`; see span).
+    [[nodiscard]] bool sees(const Box& box, const double anchor[3]) const {
+        return pixels(span(box, anchor)) != 0;
+    }
+
+    /// Whether any pixel of the image may see the scene (see restrict_to).    /// Whether any pixel of the image may see the scene (see restrict_to).
+    [[nodiscard]] bool may_hit() const { return pixels_may_hit() != 0; }
+    /// How many pixels may see the scene (see restrict_to).
+    [[nodiscard]] std::size_t pixels_may_hit() const { return pixels(span_); }
+    /// Whether any pixel of the tile may see the scene (see restrict_to).
+    [[nodiscard]] bool tile_may_hit(std::size_t tile) const {
+        const TilePixels p = tile_pixels(tile);
+        return p.i0 <= span_.i_hi && p.i1 >= span_.i_lo && p.r0 <= span_.r_hi && p.r1 >= span_.r_lo;
+    }
+
+   private:
+    /// Columns [i_lo, i_hi] and rows [r_lo, r_hi] (clamped to [-1, n]) of the pixels that
+    /// may see into a box: its corners projected, a pixel of margin for the roundings. None
+    /// (i_lo > i_hi) for a box wholly outside the depth range (behind the eye, say); every
+    /// pixel for one reaching behind a pinhole eye's plane, which cannot be projected.
+    struct Span {
+        int64_t i_lo = INT64_MIN / 2, i_hi = INT64_MAX / 2, r_lo = INT64_MIN / 2, r_hi = INT64_MAX / 2;
+    };
+    [[nodiscard]] Span span(const Box& box, const double anchor[3]) const {
+        constexpr Span kNone{INT64_MAX / 2, INT64_MIN / 2, INT64_MAX / 2, INT64_MIN / 2};  // meets no tile
+        if (!(box.lo[0] <= box.hi[0])) return kNone;  // empty scene: nothing can be hit
         double rel[8][3], depth[8], near_depth = HUGE_VAL, far_depth = -HUGE_VAL, size = 0;
         for (int corner = 0; corner < 8; ++corner) {
             double* q = rel[corner];
@@ -198,14 +221,14 @@ class CameraRays {
             size = std::max(size, std::fabs(q[0]) + std::fabs(q[1]) + std::fabs(q[2]));
         }
         const double slack = 1e-9 * size;  // far above the rounding of these depths
-        if (far_depth + slack < c_.near || near_depth - slack > c_.far) return none();
+        if (far_depth + slack < c_.near || near_depth - slack > c_.far) return kNone;
         double lo_i = HUGE_VAL, hi_i = -HUGE_VAL, lo_r = HUGE_VAL, hi_r = -HUGE_VAL;
         for (int corner = 0; corner < 8; ++corner) {
             const double* q = rel[corner];
             double x = q[0] * c_.u[0] + q[1] * c_.u[1] + q[2] * c_.u[2];
             double y = q[0] * c_.v[0] + q[1] * c_.v[1] + q[2] * c_.v[2];
             if (!c_.parallel) {
-                if (!(depth[corner] > 1e-9 * (std::fabs(x) + std::fabs(y)))) return;  // reaches behind the eye
+                if (!(depth[corner] > 1e-9 * (std::fabs(x) + std::fabs(y)))) return Span{};  // reaches behind the eye
                 x *= c_.d / depth[corner];
                 y *= c_.d / depth[corner];
             }
@@ -216,29 +239,18 @@ class CameraRays {
             lo_r = std::min(lo_r, r), hi_r = std::max(hi_r, r);
         }
         const auto clamp = [](double v, int64_t n) { return int64_t(std::max(-1.0, std::min(double(n), v))); };
-        i_lo_ = clamp(std::floor(lo_i) - 1, c_.nx), i_hi_ = clamp(std::ceil(hi_i) + 1, c_.nx);
-        r_lo_ = clamp(std::floor(lo_r) - 1, c_.ny), r_hi_ = clamp(std::ceil(hi_r) + 1, c_.ny);
+        return Span{clamp(std::floor(lo_i) - 1, c_.nx), clamp(std::ceil(hi_i) + 1, c_.nx), clamp(std::floor(lo_r) - 1, c_.ny),
+                    clamp(std::ceil(hi_r) + 1, c_.ny)};
     }
-
-    /// Whether any pixel of the image may see the scene (see restrict_to).
-    [[nodiscard]] bool may_hit() const { return pixels_may_hit() != 0; }
-    /// How many pixels may see the scene (see restrict_to).
-    [[nodiscard]] std::size_t pixels_may_hit() const {
-        const int64_t i0 = std::max<int64_t>(i_lo_, 0), i1 = std::min(i_hi_, c_.nx - 1);
-        const int64_t r0 = std::max<int64_t>(r_lo_, 0), r1 = std::min(r_hi_, c_.ny - 1);
+    [[nodiscard]] std::size_t pixels(const Span& s) const {
+        const int64_t i0 = std::max<int64_t>(s.i_lo, 0), i1 = std::min(s.i_hi, c_.nx - 1);
+        const int64_t r0 = std::max<int64_t>(s.r_lo, 0), r1 = std::min(s.r_hi, c_.ny - 1);
         return i0 <= i1 && r0 <= r1 ? std::size_t(i1 - i0 + 1) * std::size_t(r1 - r0 + 1) : 0;
     }
-    /// Whether any pixel of the tile may see the scene (see restrict_to).
-    [[nodiscard]] bool tile_may_hit(std::size_t tile) const {
-        const TilePixels p = tile_pixels(tile);
-        return p.i0 <= i_hi_ && p.i1 >= i_lo_ && p.r0 <= r_hi_ && p.r1 >= r_lo_;
-    }
-
-   private:
     [[nodiscard]] int64_t tiles_x() const { return (c_.nx + kTile - 1) / kTile; }
     CameraSpec c_;
     double pitch_x_, pitch_y_, tmin_, tmax_, dw_[3];  // the image plane's pixel size, t's range, d w
-    int64_t i_lo_ = INT64_MIN / 2, i_hi_ = INT64_MAX / 2, r_lo_ = INT64_MIN / 2, r_hi_ = INT64_MAX / 2;
+    Span span_;  // the pixels that may see the scene (restrict_to): every one until restricted
 };
 
 /// Rays from (n, 3) origin and direction arrays (with `one_origin`, a single origin row

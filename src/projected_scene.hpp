@@ -207,7 +207,7 @@ class ProjectedScene {
         if (!memory_.used)  // the links (the camera tree's) stay from one cast to the next
             for (std::size_t i = 0; i < n_nodes; ++i) node_[i].index = scene.camera.nodes[i].index, node_[i].count = scene.camera.nodes[i].count;
         memory_.used = true;
-        if (n_nodes > 0) plan_subtrees();
+        if (n_nodes > 0) projected_ = std::make_unique<std::atomic<bool>[]>(scene.camera.subtrees.size());
         const CameraSpec& c = rays.spec();
         double depth_size = 0, parallel_size = std::fabs(map_.col0) + std::fabs(map_.row0);
         for (int k = 0; k < 3; ++k) {
@@ -264,13 +264,24 @@ class ProjectedScene {
     /// points (those its triangles use first, CameraTree::point_end) are projected, then,
     /// once the subtrees before it have projected theirs (its leaves also use some of
     /// those), its leaves are framed from them while they are still in cache, then its inner
-    /// nodes from last to first, as every node's children follow it.
+    /// nodes from last to first, as every node's children follow it. A subtree whose box the
+    /// camera cannot see (CameraRays::sees) is not framed: its root gets no pixels, so no
+    /// tile visits its nodes, and only its points that later subtrees use are projected.
     void project_and_frame() {
+        const CameraTree& tree = scene_.camera;
         std::size_t before = 0;  // subtrees this worker knows projected (a prefix)
-        for (std::size_t k; (k = next_subtree_.fetch_add(1)) < subtrees_.size();) {
-            const Subtree& t = subtrees_[k];
-            project(k == 0 ? 0 : scene_.camera.point_end[subtrees_[k - 1].root], scene_.camera.point_end[t.root]);
+        for (std::size_t k; (k = next_subtree_.fetch_add(1)) < tree.subtrees.size();) {
+            const CameraTree::Subtree& t = tree.subtrees[k];
+            const bool seen = rays_.sees(t.box, scene_.anchor);
+            if (seen)
+                project(k == 0 ? 0 : tree.point_end[tree.subtrees[k - 1].root], tree.point_end[t.root]);
+            else
+                for (uint32_t j = t.shared_begin; j < t.shared_end; ++j) project(tree.shared[j], tree.shared[j] + 1);
             projected_[k].store(true, std::memory_order_release);
+            if (!seen) {
+                node_[t.root].rect = kNoPixels;
+                continue;
+            }
             while (before < k) {
                 if (projected_[before].load(std::memory_order_acquire))
                     ++before;
@@ -286,7 +297,8 @@ class ProjectedScene {
         }
     }
     void frame_top() {
-        for (auto i = top_.rbegin(); i != top_.rend(); ++i) join_children(*i);
+        const std::vector<uint32_t>& top = scene_.camera.top;
+        for (auto i = top.rbegin(); i != top.rend(); ++i) join_children(*i);
     }
 
     enum class Reach { none, rect, unknown };
@@ -674,47 +686,6 @@ class ProjectedScene {
 #endif
     }
 
-    /// Splits the hierarchy into subtrees for `frame_subtrees`: the largest is split until
-    /// there are enough to share among workers, or it is a leaf. The nodes split off are
-    /// `top_`, parents before children. Relies on the builder's layout (sibling pairs,
-    /// depth first): an inner node's descendants are one block, from its children to the
-    /// last pair of its rightmost inner descendant. (The camera tree keeps that layout.)
-    void plan_subtrees() {
-        const auto subtree = [this](uint32_t root) {
-            const std::vector<CameraTree::Link>& nodes = scene_.camera.nodes;
-            const auto is_leaf = [&](uint32_t i) { return nodes[i].count != 0; };
-            if (is_leaf(root)) return Subtree{root, root, root};
-            // the block ends with the children of the last inner node on the way down that
-            // takes the right child when it is inner, else the left one
-            uint32_t i = root, last;
-            do {
-                last = nodes[i].index;
-                i = is_leaf(last + 1) ? last : last + 1;
-            } while (!is_leaf(i));
-            return Subtree{root, nodes[root].index, last + 2};
-        };
-        const auto size = [](const Subtree& t) { return t.end - t.first; };
-        const auto smaller = [&](const Subtree& a, const Subtree& b) { return size(a) < size(b); };
-        subtrees_ = {subtree(0)};
-        while (subtrees_.size() < kSubtrees && size(subtrees_.front()) > 0) {
-            std::pop_heap(subtrees_.begin(), subtrees_.end(), smaller);
-            const uint32_t root = subtrees_.back().root, left = scene_.camera.nodes[root].index;
-            top_.push_back(root);
-            subtrees_.back() = subtree(left);
-            std::push_heap(subtrees_.begin(), subtrees_.end(), smaller);
-            subtrees_.push_back(subtree(left + 1));
-            std::push_heap(subtrees_.begin(), subtrees_.end(), smaller);
-        }
-        // in the triangles' order (a subtree's first is its leftmost leaf's)
-        const auto first_triangle = [this](const Subtree& t) {
-            uint32_t i = t.root;
-            while (scene_.camera.nodes[i].count == 0) i = scene_.camera.nodes[i].index;
-            return scene_.camera.nodes[i].index;
-        };
-        std::sort(subtrees_.begin(), subtrees_.end(), [&](const Subtree& a, const Subtree& b) { return first_triangle(a) < first_triangle(b); });
-        projected_ = std::make_unique<std::atomic<bool>[]>(subtrees_.size());
-    }
-
     const Scene& scene_;
     const CameraRays& rays_;
     CameraRays::PixelMap map_;
@@ -724,13 +695,6 @@ class ProjectedScene {
     double to_anchor_[3], reach_[3], depth_slack_;
     float margin_, slack_, near_, far_;  // in single precision: see the constructor
     float sure_near_, sure_far_, sure_margin_;  // see SureHits
-    /// A subtree: its root, then its other nodes [first, end) (empty for a leaf).
-    struct Subtree {
-        uint32_t root, first, end;
-    };
-    static constexpr std::size_t kSubtrees = 64;  // enough to balance a few dozen workers
-    std::vector<Subtree> subtrees_;
-    std::vector<uint32_t> top_;
     std::atomic<std::size_t> next_subtree_{0};
     std::unique_ptr<std::atomic<bool>[]> projected_;  // per subtree, whether its points are projected
     static constexpr std::size_t kRun = 1 << 14;  // points a worker projects at a time (a multiple of 4)

@@ -347,6 +347,25 @@ def test_node_rectangles_framed_by_many_workers(build_threads):
         assert compare(vrc.Scene(two), vrc.Scene(two), around(two), threads=threads) > 0
 
 
+@pytest.mark.parametrize("parallel", [False, True])
+def test_views_of_part_of_a_mesh(parallel):
+    """A camera frames only the camera tree's subtrees whose boxes it may see, and of the
+    others' points projects those that seen subtrees share (ProjectedScene::
+    project_and_frame): views of parts of a mesh, cast after a view of the whole (whose
+    projections the working memory keeps) and on a scene of their own, equal the rays cast
+    one by one."""
+    mesh = bumpy_sphere(5)
+    scene = vrc.Scene(mesh)
+    whole = around(mesh, nx=96, ny=80, parallel=parallel)
+    parts = [(0.6, 1.2, -0.3, 0.3, -0.3, 0.3), (-0.2, 0.2, 0.7, 1.2, 0.3, 0.8), (-1.2, -0.5, -1.2, -0.5, -0.2, 0.2)]
+    for bounds in parts:
+        for view in ("iso", "-z"):
+            part = vrc.Camera.framing(bounds, view=view, nx=96, ny=80, parallel=parallel)
+            assert assert_same_as_ray_by_ray(scene, whole) > 1000
+            assert compare(scene, scene, part) > 1000
+            assert compare(vrc.Scene(mesh), scene, part) > 1000
+
+
 def test_camera_tree_leaves_hold_up_to_63_triangles():
     """Camera casts go through the BVH with every subtree of at most 63 triangles collapsed
     into one leaf (the BVH's own leaves hold at most 8): 63 triangles make one leaf, 64 a
