@@ -526,7 +526,13 @@ class TileTracer {
                     footprint.emplace(projected_.footprint(i));
                 }
                 const auto [may, sure] = footprint->may_cover8(i0_ + c, r0_ + r, either_side);
-                for (open &= may; open != 0; open &= open - 1) {
+                open &= may;
+                if (sure_allowed_ && sure_depths && open != 0 && (open & ~sure) == 0 &&
+                    !((made_[r] | sure_bits_[r]) >> c & open)) {
+                    settle8(c, r, i, open, float(rect.far));
+                    continue;
+                }
+                for (; open != 0; open &= open - 1) {
                     const int b = __builtin_ctz(open);
                     try_pixel(c + b, r, i, float(rect.far), sure_depths && (sure >> b & 1));
                 }
@@ -544,6 +550,36 @@ class TileTracer {
             }
 #endif
     }
+
+#if defined(__AVX2__)
+    /// Settles the pixels `open` (bits) of columns c to c + 7 of row r by sure hits of
+    /// triangle i, whose depths lie below `far`, when none of them has a ray or a sure hit
+    /// yet: what try_pixel does to each (test_pixel's first sure hit, then the quads' depth
+    /// bounds), in vector lanes. A large triangle's pixels mostly go so.
+    void settle8(int64_t c, int64_t r, uint32_t i, unsigned open, float far) {
+        const int64_t j = c + r * kStride;
+        sure_bits_[r] |= uint64_t(open) << c;
+        const __m256i bits32 = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        const __m256i in32 = _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(int(open)), bits32), bits32);
+        _mm256_maskstore_epi32(reinterpret_cast<int*>(sure_.data() + j), in32, _mm256_set1_epi32(int(i)));
+        const __m256i bits64 = _mm256_setr_epi64x(1, 2, 4, 8);
+        const __m256d bound = _mm256_set1_pd(double(far));
+        for (int half = 0; half < 2; ++half) {
+            const __m256i in64 = _mm256_cmpeq_epi64(_mm256_and_si256(_mm256_set1_epi64x(open >> 4 * half), bits64), bits64);
+            _mm256_maskstore_pd(depth_bound_.data() + j + 4 * half, in64, bound);
+        }
+        if (point_rows_) {  // (as test_pixel)
+            const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
+            for (int k = 0; k < 3; ++k) prefetch_line(scene_.point_ids.data() + tri[k]);
+        }
+        const int64_t last = c + 31 - __builtin_clz(open);
+        for (int64_t qc = (c + __builtin_ctz(open)) >> 1; qc <= last >> 1; ++qc) {
+            const int64_t q = 2 * qc + 2 * (r >> 1) * kStride;  // the quad's first pixel
+            quad_[qc + (r >> 1) * kQuads] = std::max(std::max(depth_bound_[q], depth_bound_[q + 1]),
+                                                     std::max(depth_bound_[q + kStride], depth_bound_[q + kStride + 1]));
+        }
+    }
+#endif
 
     /// Tests triangle i, whose depths lie below `far`, on the block's ray at column c, row
     /// r (`sure`: surely hit, see test_pixel); on a closer hit, the depth bounds of the ray
