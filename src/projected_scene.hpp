@@ -564,9 +564,13 @@ class ProjectedScene {
             return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(lanes(f[0]), x), _mm256_mul_pd(lanes(f[1]), y)),
                                  _mm256_mul_pd(lanes(f[2]), z));
         };
-        const __m256d x = _mm256_sub_pd(_mm256_setr_pd(p[0], p[3], p[6], p[9]), lanes(c.eye[0]));
-        const __m256d y = _mm256_sub_pd(_mm256_setr_pd(p[1], p[4], p[7], p[10]), lanes(c.eye[1]));
-        const __m256d z = _mm256_sub_pd(_mm256_setr_pd(p[2], p[5], p[8], p[11]), lanes(c.eye[2]));
+        // the four points' coordinates, each axis in the lanes: three loads and five shuffles
+        const __m256d a = _mm256_loadu_pd(p), b = _mm256_loadu_pd(p + 4), d = _mm256_loadu_pd(p + 8);
+        const __m256d xy = _mm256_blend_pd(a, b, 0b1100), yz = _mm256_blend_pd(b, d, 0b1100);  // x0 y0 x2 y2, y1 z1 y3 z3
+        const __m256d zx = _mm256_permute2f128_pd(a, d, 0x21);                                  // z0 x1 z2 x3
+        const __m256d x = _mm256_sub_pd(_mm256_shuffle_pd(xy, zx, 0b1010), lanes(c.eye[0]));
+        const __m256d y = _mm256_sub_pd(_mm256_shuffle_pd(xy, yz, 0b0101), lanes(c.eye[1]));
+        const __m256d z = _mm256_sub_pd(_mm256_shuffle_pd(zx, yz, 0b1010), lanes(c.eye[2]));
         const __m256d depth = dot3(map_.depth, x, y, z);
         const __m256d den = c.parallel ? lanes(1.0) : depth;
         const __m256d abs = _mm256_castsi256_pd(_mm256_set1_epi64x(INT64_MAX));
