@@ -521,10 +521,7 @@ class TileTracer {
                                         unsigned(_mm256_movemask_pd(_mm256_cmp_pd(near, _mm256_loadu_pd(bound + 4), _CMP_GT_OQ))) << 4;
                 unsigned open = ~beyond & (0xffu >> std::max<int64_t>(0, c + 7 - rect.c1));
                 if (!open) continue;
-                if (!footprint) {
-                    scene_.prefetch_points(i);  // for the kernel, while the footprint is set up
-                    footprint.emplace(projected_.footprint(i));
-                }
+                if (!footprint) footprint.emplace(projected_.footprint(i));
                 const auto [may, sure] = footprint->may_cover8(i0_ + c, r0_ + r, either_side);
                 open &= may;
                 if (sure_allowed_ && sure_depths && open != 0 && (open & ~sure) == 0 &&
