@@ -86,6 +86,18 @@ def test_strategies_precisions_and_culling():
                 assert assert_same_as_ray_by_ray(scene, cam, **options) > 300
 
 
+@pytest.mark.parametrize("view", ["+x", "-x", "+y", "-y", "+z", "-z", "iso"])
+def test_views_along_each_axis(view):
+    """The sure hits' depths and weights are completed four pixels at a time, with the
+    shear's axes chosen per lane, or by index when the four rays share them (views along an
+    axis): each way, with and without back-face culling (which the axes' order decides),
+    the rays cast one by one."""
+    mesh = bumpy_sphere(4)
+    scene = vrc.Scene(mesh)
+    for culling in (False, True):
+        assert assert_same_as_ray_by_ray(scene, around(mesh, view=view, nx=80, ny=64), backface_culling=culling) > 900
+
+
 @pytest.mark.parametrize("offset", [0.0, 1e5])
 def test_eye_inside_a_closed_mesh(offset):
     # Triangles all around the eye, some reaching behind its plane (no usable projection),
