@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <new>
 #include <optional>
 #include <type_traits>
 #include <vector>
@@ -622,12 +623,12 @@ class TileTracer {
             make_ray(j);
             if (sure_bits_[r] & bit) {
                 sure_bits_[r] &= ~bit;
-                test_triangle(*kernel_[j], scene_, sure_[j], ray_[j].tmin, bound_[j], hit_[j]);
+                test_triangle(kernel(j), scene_, sure_[j], ray_[j].tmin, bound_[j], hit_[j]);
                 resolved = true;
             }
         }
         const double before = bound_[j];
-        test_triangle(*kernel_[j], scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
+        test_triangle(kernel(j), scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
         if (bound_[j] == before && !resolved) return false;
         depth_bound_[j] = bound_[j] * scale_[j] * (1 + 1e-12) + projected_.depth_slack();  // rounded up
         return true;
@@ -636,7 +637,7 @@ class TileTracer {
     void make_ray(int64_t j) {
         made_[j / kStride] |= uint64_t(1) << (j % kStride);
         rays_.set_ray(ray_[j], i0_ + j % kStride, r0_ + j / kStride);
-        kernel_[j].emplace(ray_[j], context_);
+        new (kernel_[j].bytes) Kernel(ray_[j], context_);
         hit_[j] = Hit<Real>{};
         bound_[j] = ray_[j].tmax;  // t; depth_bound_ stays unbounded until a hit
         scale_[j] = dot(map_.depth, ray_[j].dir);  // depth per unit of t
@@ -663,7 +664,15 @@ class TileTracer {
     std::vector<uint32_t> sure_;   // the sure hit of each such pixel
     uint32_t hit_prims_[kStride * kStride];  // the block's hit triangles, for finish's prefetches
     std::vector<Ray> ray_;                       // ray_, kernel_ and hit_: set for the rays made only
-    std::vector<std::optional<Kernel>> kernel_;  // (optional: kernels have no default state)
+    /// Room for a ray's kernel (which has no default state), made over whatever was there:
+    /// a kernel is trivially destructible, and an optional's check of its old state was a
+    /// load of a line about to be written, mostly a miss that held up the pixel's test.
+    struct KernelRoom {
+        alignas(Kernel) unsigned char bytes[sizeof(Kernel)];
+    };
+    static_assert(std::is_trivially_destructible_v<Kernel>, "a kernel is made over the last one");
+    std::vector<KernelRoom> kernel_;
+    Kernel& kernel(int64_t j) { return *std::launder(reinterpret_cast<Kernel*>(kernel_[j].bytes)); }
     std::vector<Hit<Real>> hit_;
     std::vector<double> bound_, scale_, depth_bound_;  // t of the hit, depth per unit t, depth of the hit rounded up
     std::vector<float> guess_far_;  // a flat scene's likely hit per pixel: its farthest point depth
