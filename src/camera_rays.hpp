@@ -190,7 +190,7 @@ class CameraRays {
         return pixels(span(box, anchor)) != 0;
     }
 
-    /// Whether any pixel of the image may see the scene (see restrict_to).    /// Whether any pixel of the image may see the scene (see restrict_to).
+    /// Whether any pixel of the image may see the scene (see restrict_to).
     [[nodiscard]] bool may_hit() const { return pixels_may_hit() != 0; }
     /// How many pixels may see the scene (see restrict_to).
     [[nodiscard]] std::size_t pixels_may_hit() const { return pixels(span_); }

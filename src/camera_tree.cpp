@@ -37,7 +37,6 @@ std::vector<Run> runs(const std::vector<Node>& nodes) {
 /// (`source`: the BVH node each camera node was made from)
 void place(const std::vector<Node>& nodes, const std::vector<Run>& run, uint32_t from, uint32_t to,
            std::vector<CameraTree::Link>& out, std::vector<uint32_t>& source) {
-    source.resize(out.size());
     source[to] = from;
     if (run[from].count <= CameraTree::kMaxLeaf) {
         out[to] = {run[from].first, run[from].count};
@@ -46,6 +45,7 @@ void place(const std::vector<Node>& nodes, const std::vector<Run>& run, uint32_t
     const auto pair = uint32_t(out.size());
     out[to] = {pair, 0};
     out.resize(out.size() + 2);
+    source.resize(out.size());
     place(nodes, run, nodes[from].index, pair, out, source);  // (depth < 96: see bvh_build.cpp)
     place(nodes, run, nodes[from].index + 1, pair + 1, out, source);
 }
@@ -128,7 +128,7 @@ void build_camera_tree(Scene& scene) {
     tree = CameraTree{};
     if (scene.nodes.empty()) return;
     tree.nodes.resize(1);
-    std::vector<uint32_t> source;
+    std::vector<uint32_t> source(1);
     place(scene.nodes, runs(scene.nodes), 0, 0, tree.nodes, source);
     shrink_huge(tree.nodes);
 

@@ -566,16 +566,9 @@ class TileTracer {
             const __m256i in64 = _mm256_cmpeq_epi64(_mm256_and_si256(_mm256_set1_epi64x(open >> 4 * half), bits64), bits64);
             _mm256_maskstore_pd(depth_bound_.data() + j + 4 * half, in64, bound);
         }
-        if (point_rows_) {  // (as test_pixel)
-            const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
-            for (int k = 0; k < 3; ++k) prefetch_line(scene_.point_ids.data() + tri[k]);
-        }
+        ask_point_rows(i);
         const int64_t last = c + 31 - __builtin_clz(open);
-        for (int64_t qc = (c + __builtin_ctz(open)) >> 1; qc <= last >> 1; ++qc) {
-            const int64_t q = 2 * qc + 2 * (r >> 1) * kStride;  // the quad's first pixel
-            quad_[qc + (r >> 1) * kQuads] = std::max(std::max(depth_bound_[q], depth_bound_[q + 1]),
-                                                     std::max(depth_bound_[q + kStride], depth_bound_[q + kStride + 1]));
-        }
+        for (int64_t qc = (c + __builtin_ctz(open)) >> 1; qc <= last >> 1; ++qc) bound_quad(qc, r >> 1);
     }
 #endif
 
@@ -583,10 +576,22 @@ class TileTracer {
     /// r (`sure`: surely hit, see test_pixel); on a closer hit, the depth bounds of the ray
     /// and of its quad follow.
     void try_pixel(int64_t c, int64_t r, uint32_t i, float far, bool sure) {
-        if (!test_pixel(c, r, i, far, sure)) return;
-        const int64_t q = 2 * (c >> 1) + 2 * (r >> 1) * kStride;  // the quad's first pixel
-        quad_[(c >> 1) + (r >> 1) * kQuads] = std::max(std::max(depth_bound_[q], depth_bound_[q + 1]),
-                                                       std::max(depth_bound_[q + kStride], depth_bound_[q + kStride + 1]));
+        if (test_pixel(c, r, i, far, sure)) bound_quad(c >> 1, r >> 1);
+    }
+
+    /// The depth bound of the 2x2 quad of pixels at quad column qc, row qr: its pixels' largest.
+    void bound_quad(int64_t qc, int64_t qr) {
+        const int64_t q = 2 * qc + 2 * qr * kStride;  // the quad's first pixel
+        quad_[qc + qr * kQuads] = std::max(std::max(depth_bound_[q], depth_bound_[q + 1]),
+                                           std::max(depth_bound_[q + kStride], depth_bound_[q + kStride + 1]));
+    }
+
+    /// With the mesh's point arrays interpolated, asks the cache for what finds the rows of
+    /// a sure hit's corners when stored (its points' input indices).
+    void ask_point_rows(uint32_t i) const {
+        if (!point_rows_) return;
+        const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
+        for (int k = 0; k < 3; ++k) prefetch_line(scene_.point_ids.data() + tri[k]);
     }
 
     /// Tests triangle i on the block's ray at column c, row r; on a closer hit, the ray's
@@ -613,10 +618,7 @@ class TileTracer {
                 sure_bits_[r] |= bit;
                 sure_[j] = i;
                 depth_bound_[j] = double(far);
-                if (point_rows_) {  // (the rows of its corners are found through these when stored)
-                    const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
-                    for (int k = 0; k < 3; ++k) prefetch_line(scene_.point_ids.data() + tri[k]);
-                }
+                ask_point_rows(i);
                 return true;
             }
 #endif
