@@ -1,8 +1,9 @@
-"""A scene reuses the output arrays of its earlier casts only once nothing refers to them."""
+"""A scene reuses the output arrays and images of its earlier casts only once nothing refers to them."""
 
 from __future__ import annotations
 
 import gc
+import weakref
 
 import numpy as np
 import pytest
@@ -65,10 +66,10 @@ def test_arrays_and_views_outlive_their_image(scene_and_cameras):
 
 def test_dropped_images_lend_their_memory(scene_and_cameras):
     scene, near, far = scene_and_cameras
-    depth_at = dropped_image_depth(scene, near)
-    assert scene.kept_output_bytes >= 64 * 48 * 8
+    dropped = {dropped_image_depth(scene, near) for _ in range(2)}  # (two images take turns)
+    assert scene.kept_output_bytes >= 2 * 64 * 48 * 8
     again = scene.cast(far)
-    assert address(again["Depth"]) == depth_at
+    assert address(again["Depth"]) in dropped
     reference = vrc.Scene(scene.prepared.surface).cast(far)
     for name in reference.point_data.keys():
         np.testing.assert_array_equal(again[name], reference[name])
@@ -127,14 +128,139 @@ def test_small_batches_leave_the_kept_arrays_alone(scene_and_cameras):
     # A few rays' arrays are made fresh, not kept: they neither take an image's dropped
     # arrays nor push them out of the pool.
     scene, near, _ = scene_and_cameras
-    depth_at = dropped_image_depth(scene, near)
+    dropped = {dropped_image_depth(scene, near) for _ in range(2)}
     kept = scene.kept_output_bytes
     rng = np.random.default_rng(6)
     for n in (1, 100, 1000):
         origins = rng.normal(size=(n, 3)) * 3
         hits = scene.intersect(origins, -origins)
-        assert address(hits["t"]) != depth_at
+        assert address(hits["t"]) not in dropped
         del hits
         gc.collect()
         assert scene.kept_output_bytes == kept
-    assert address(scene.cast(near)["Depth"]) == depth_at
+    assert address(scene.cast(near)["Depth"]) in dropped
+
+
+def fresh_cast(scene, camera, **options):
+    return vrc.Scene(scene.prepared.surface).cast(camera, **options)
+
+
+def assert_same_image(image, reference):
+    assert image.dimensions == reference.dimensions
+    np.testing.assert_allclose(image.origin, reference.origin)
+    np.testing.assert_allclose(image.spacing, reference.spacing)
+    assert image.point_data.keys() == reference.point_data.keys()
+    assert image.point_data.active_scalars_name == reference.point_data.active_scalars_name
+    assert image.cell_data.keys() == [] and image.field_data.keys() == []
+    for name in reference.point_data.keys():
+        np.testing.assert_array_equal(image[name], reference[name])
+        got, want = image.GetPointData().GetArray(name), reference.GetPointData().GetArray(name)
+        assert got.GetRange() == want.GetRange(), name  # (VTK caches ranges until an array is modified)
+
+
+def test_dropped_images_are_handed_back_refilled():
+    scene = vrc.Scene(pv.Sphere(theta_resolution=30, phi_resolution=30))
+    near = vrc.Camera.framing(scene.prepared.surface.bounds, view="xy", nx=40, ny=30)
+    far = near.replace(view_angle=70.0)
+    dropped = set()
+    for _ in range(2):
+        image = scene.cast(near)
+        image.GetPointData().GetArray("Depth").GetRange()  # (a range VTK then keeps)
+        dropped.add(id(image))
+        del image
+    for camera, world_space in ((far, False), (near, True), (far, True)):
+        image = scene.cast(camera, world_space=world_space)
+        assert id(image) in dropped  # (the two images take turns)
+        assert_same_image(image, fresh_cast(scene, camera, world_space=world_space))
+        del image
+
+
+IMAGE_NAMES = ["TriangleId", "CellId", "Barycentric", "Depth", "vtkValidPointMask", "Normals", "Elevation"]
+
+
+def hold_weakref(image):
+    """A weak reference: what it sees, once its image is dropped (nothing if it died)."""
+    ref = weakref.ref(image)
+    return lambda: {} if ref() is None else snapshot(ref())
+
+
+def hold_shallow_copy(image):
+    other = pv.ImageData()
+    other.ShallowCopy(image)
+    return lambda: snapshot(other)
+
+
+def hold_pipeline(image):
+    from vtkmodules.vtkFiltersCore import vtkPassThrough
+
+    consumer = vtkPassThrough()
+    consumer.SetInputData(image)
+    return lambda: snapshot(pv.wrap(consumer.GetInputDataObject(0, 0)))
+
+
+def hold_point_data(image):
+    point_data = image.GetPointData()
+    return lambda: {name: np.array(pv.convert_array(point_data.GetArray(name))) for name in IMAGE_NAMES}
+
+
+def hold_pyvista_point_data(image):
+    point_data = image.point_data
+    return lambda: {name: np.array(point_data[name]) for name in point_data.keys()}
+
+
+def hold_array(get, name):
+    def hold(image):
+        held = get(image)
+        return lambda: {name: np.array(pv.convert_array(held) if hasattr(held, "GetRange") else held)}
+
+    return hold
+
+
+HOLDS = {  # each holds part of an image and returns what that part shows, by array name
+    "weak reference": hold_weakref,
+    "point data": hold_point_data,
+    "pyvista point data": hold_pyvista_point_data,
+    "VTK array": hold_array(lambda image: image.GetPointData().GetArray("Depth"), "Depth"),
+    "pyvista array": hold_array(lambda image: image["Depth"], "Depth"),
+    "numpy view": hold_array(lambda image: np.asarray(image.point_data["Barycentric"]), "Barycentric"),
+    "shallow copy": hold_shallow_copy,
+    "pipeline": hold_pipeline,
+}
+
+
+@pytest.mark.parametrize("hold", HOLDS.values(), ids=HOLDS.keys())
+def test_images_anything_observes_are_not_handed_back(scene_and_cameras, hold):
+    scene, near, far = scene_and_cameras
+    image = scene.cast(near)
+    assert list(image.point_data.keys()) == IMAGE_NAMES
+    look, before = hold(image), snapshot(image)
+    del image
+    gc.collect()
+    for _ in range(4):
+        scene.cast(far)  # (dropped at once: the image held would be the next but one)
+    for name, values in look().items():
+        np.testing.assert_array_equal(values, before[name])
+
+
+CHANGES = {
+    "origin": lambda image: image.SetOrigin(1.0, 2.0, 3.0),
+    "point array added": lambda image: image.point_data.set_array(np.zeros(image.n_points), "Extra"),
+    "array removed": lambda image: image.GetPointData().RemoveArray("CellId"),
+    "array renamed": lambda image: image.GetPointData().GetArray("Depth").SetName("Range"),
+    "field data": lambda image: image.field_data.set_array(np.arange(3.0), "Note"),
+    "cell data": lambda image: image.cell_data.set_array(np.zeros(image.n_cells), "Mark"),
+    "active scalars": lambda image: image.GetPointData().SetActiveScalars("TriangleId"),
+    "tuples": lambda image: image.GetPointData().GetArray("Depth").SetNumberOfTuples(7),
+    "components": lambda image: image.GetPointData().GetArray("Barycentric").SetNumberOfComponents(1),
+    "memory": lambda image: image.GetPointData().GetArray("Depth").SetNumberOfTuples(2 * image.n_points),
+}
+
+
+@pytest.mark.parametrize("change", CHANGES.values(), ids=CHANGES.keys())
+def test_images_changed_through_vtk_are_made_anew(scene_and_cameras, change):
+    scene, near, far = scene_and_cameras
+    image = scene.cast(near)
+    change(image)
+    del image
+    for camera in (near, far, near):
+        assert_same_image(scene.cast(camera), fresh_cast(scene, camera))

@@ -204,10 +204,10 @@ def test_intersect_cell_ids_of_a_non_polygonal_input():
 def test_the_image_shares_the_arrays_the_core_wrote():
     mesh = fielded_sphere()
     scene = vrc.Scene(mesh)
-    image = pv.ImageData()
-    _, buffers = scene._cast_into(image, view(32, 24))
-    for name, values in buffers.items():
-        assert np.shares_memory(vtk_to_numpy(image.GetPointData().GetArray(name)), values), name
+    for given in (pv.ImageData(), scene._images):  # an image given, an image of the scene's pool
+        _, buffers, image = scene._cast_into(given, view(32, 24))
+        for name, values in buffers.items():
+            assert np.shares_memory(vtk_to_numpy(image.GetPointData().GetArray(name)), values), name
 
 
 def test_inputs_are_not_modified():

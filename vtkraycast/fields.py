@@ -28,6 +28,7 @@ __all__ = [
     "mesh_arrays",
     "miss_value",
     "output_bytes",
+    "output_layouts",
     "request_outputs",
     "row_layout",
     "select_arrays",
@@ -141,15 +142,23 @@ def output_bytes(found: MeshArrays, names: list[str], real: type) -> int:
     return sum(dtype.itemsize * math.prod(shape) for dtype, shape in (row_layout(found, name, real) for name in names))
 
 
+def output_layouts(
+    found: MeshArrays, names: list[str], n: int, real: type
+) -> dict[str, tuple[np.dtype, tuple[int, ...]]]:
+    """The dtype and shape of each output array ``names`` for ``n`` rays, by name."""
+    layouts = {}
+    for name in names:
+        dtype, shape = row_layout(found, name, real)
+        layouts[name] = (dtype, (n, *shape))
+    return layouts
+
+
 def allocate(
     found: MeshArrays, names: list[str], n: int, real: type, pool: BufferPool | None = None
 ) -> dict[str, np.ndarray]:
     """Uninitialised output arrays for ``n`` rays, in the order of ``names`` (the core
     writes every element), from ``pool`` when given."""
-    layouts = {}
-    for name in names:
-        dtype, shape = row_layout(found, name, real)
-        layouts[name] = (dtype, (n, *shape))
+    layouts = output_layouts(found, names, n, real)
     if pool is not None:
         return pool.allocate(layouts)
     return {name: np.empty(shape, dtype) for name, (dtype, shape) in layouts.items()}

@@ -9,7 +9,7 @@ from vtkmodules.vtkCommonDataModel import vtkImageData
 
 from .camera import Camera
 
-__all__ = ["fill_image", "image_geometry", "set_arrays"]
+__all__ = ["fill_image", "image_geometry", "place_image", "set_arrays"]
 
 
 def image_geometry(camera: Camera | None, world_space: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -34,12 +34,18 @@ def fill_image(
 ) -> vtkImageData:
     """Sets ``image`` to ``camera``'s pixel grid and ``buffers`` as its point arrays
     (:func:`set_arrays`)."""
+    return set_arrays(place_image(image, camera, world_space=world_space), buffers)
+
+
+def place_image(image: vtkImageData, camera: Camera, *, world_space: bool = False) -> vtkImageData:
+    """Sets ``image``'s dimensions, origin, spacing and direction to ``camera``'s pixel
+    grid (:func:`image_geometry`)."""
     origin, spacing, direction = image_geometry(camera, world_space)
     image.SetDimensions(camera.nx, camera.ny, 1)
     image.SetOrigin(*origin)
     image.SetSpacing(*spacing)
     image.SetDirectionMatrix(*direction.ravel())
-    return set_arrays(image, buffers)
+    return image
 
 
 def set_arrays(image: vtkImageData, buffers: dict[str, np.ndarray]) -> vtkImageData:

@@ -15,8 +15,18 @@ from vtkmodules.vtkCommonDataModel import vtkImageData
 from . import _core
 from .buffers import BufferPool
 from .camera import Camera
-from .fields import GEOMETRY_ARRAYS, allocate, mesh_arrays, output_bytes, request_outputs, row_layout, select_arrays
+from .fields import (
+    GEOMETRY_ARRAYS,
+    allocate,
+    mesh_arrays,
+    output_bytes,
+    output_layouts,
+    request_outputs,
+    row_layout,
+    select_arrays,
+)
 from .image import fill_image, set_arrays
+from .image_pool import ImagePool
 from .magnitudes import direction_shifts, scene_scale, shift_lengths
 from .mesh import PreparedMesh, prepare_mesh
 from .parallel import Workspace, cast_on_node, communicator, composite, default_threads, node_frames, triangle_keys
@@ -176,6 +186,7 @@ class Scene:
         self._grid: _core.InsideGrid | bool | None = None  # contains' cells (False: cannot answer)
         self._mesh = prepare_mesh(mesh)
         self._outputs = BufferPool()  # the arrays of the last casts, reused once unreferenced
+        self._images = ImagePool(self._outputs)  # the images of the last casts, likewise
         points, triangles = self._mesh.points, self._mesh.triangles
         self._core = _core.Scene(points, triangles, _threads(threads), bool(bvh))
         self._scale = scene_scale(self._core.point_bounds)
@@ -212,7 +223,7 @@ class Scene:
         scene keeps for the next ones (writing into kept memory spares the page faults of
         fresh arrays) and that no image, array or view holds any more: at most two casts'
         worth."""
-        return self._outputs.unused_bytes
+        return self._outputs.unused_bytes + self._images.unused_bytes
 
     @property
     def prepared(self):
@@ -226,7 +237,7 @@ class Scene:
         form needs no pyvista."""
         if "world_space" in options:
             raise TypeError("buffers() places no image: world_space is an option of cast()")
-        return self._cast_into(None, camera, **options)
+        return self._cast_into(None, camera, **options)[:2]
 
     def cast(self, camera: Camera | Any, *, root: int | None = 0, layers: int = 1, **options: Any) -> Any:
         """Casts one ray per pixel of ``camera`` and returns the geometry buffer.
@@ -281,7 +292,8 @@ class Scene:
         -------
         pyvista.ImageData
             Dimensions ``(nx, ny, 1)``, spacing 1, origin 0 unless ``world_space``; the
-            arrays as point data.
+            arrays as point data. It may be the image of an earlier cast, refilled, when
+            nothing refers to that image or its arrays any more (see ``image_pool``).
         """
         import pyvista as pv
 
@@ -296,9 +308,7 @@ class Scene:
             world_space = options.get("world_space", False)
             camera, arrays = self._cast_parallel(camera, root=root, **options)
             return None if arrays is None else fill_image(pv.ImageData(), camera, arrays, world_space=world_space)
-        image = pv.ImageData()
-        self._cast_into(image, camera, **options)
-        return image
+        return self._cast_into(self._images, camera, **options)[2]
 
     def _cast_crossings(self, camera: Camera, layers: int, wanted: list[str], along: list[str], options: dict) -> Any:
         """A cast with depth layers or with arrays of every crossing (see :meth:`cast`)."""
@@ -552,7 +562,7 @@ class Scene:
 
     def _cast_into(
         self,
-        image: vtkImageData | None,
+        image: vtkImageData | ImagePool | None,
         camera: Camera | Any,
         *,
         mesh: PreparedMesh | None = None,
@@ -567,11 +577,12 @@ class Scene:
         interpolate: bool = True,
         progress: Callable[[int, int], bool | None] | None = None,
         progress_bar: bool = False,
-    ) -> tuple[Camera, dict[str, np.ndarray]]:
-        """Casts (options as :meth:`cast`) and returns the camera and the output arrays,
-        set as ``image``'s point data and geometry when an image is given. ``mesh``: the
-        scene's mesh with other cell ids to write as CellId (the parallel cast's global ids);
-        ``out``: the arrays to write, by name (every one of ``arrays``), instead of new ones."""
+    ) -> tuple[Camera, dict[str, np.ndarray], vtkImageData | None]:
+        """Casts (options as :meth:`cast`) and returns the camera, the output arrays and
+        the image: ``image`` with the arrays set as its point data and its geometry, or an
+        image of the pool ``image``, or None. ``mesh``: the scene's mesh with other cell ids
+        to write as CellId (the parallel cast's global ids); ``out``: the arrays to write, by
+        name (every one of ``arrays``), instead of new ones."""
         if not isinstance(camera, Camera):
             camera = Camera.from_vtk(camera)
         found = mesh_arrays(self._mesh)
@@ -601,12 +612,18 @@ class Scene:
         request.shift_x, request.shift_y = (math.ldexp(float(x), window) for x in camera.shift)
         request.near, request.far = _shifted(camera.near, shift), _shifted(camera.far, shift)
         request.nx, request.ny, request.parallel = camera.nx, camera.ny, camera.parallel
-        buffers = allocate(found, names, n, real, self._outputs) if out is None else {name: out[name] for name in names}
+        # The image and the arrays the core writes are set up before the cast: Python run
+        # right after a cast meets cold caches (set up after, they took 0.3 to 0.5 ms more
+        # of a 13 ms frog re-cast here, timed in alternation in one process).
+        pool = image if isinstance(image, ImagePool) else None
+        if pool is not None:
+            image, buffers = pool.image(output_layouts(found, names, n, real), camera, world_space)
+        elif out is None:
+            buffers = allocate(found, names, n, real, self._outputs)
+        else:
+            buffers = {name: out[name] for name in names}
         request_outputs(request, mesh or self._mesh, found, buffers)
-        if image is not None:
-            # The image and the arrays the core writes are set up before the cast: Python
-            # run right after a cast meets cold caches (set up after, they took 0.3 to 0.5 ms
-            # more of a 13 ms frog re-cast here, timed in alternation in one process).
+        if image is not None and pool is None:
             fill_image(image, camera, buffers, world_space=world_space)
         with progress_reporter(progress, progress_bar, f"Ray casting {camera.nx}x{camera.ny}") as poll:
             request.progress = poll
@@ -615,7 +632,9 @@ class Scene:
         for name in ("Depth", "Position"):
             if name in buffers:
                 shift_lengths(buffers[name], shift, name, distance=name == "Depth")
-        return camera, buffers
+        if pool is not None:
+            pool.written(image)
+        return camera, buffers, image
 
     def _request(
         self, strategy: str, precision: str, accel: str, threads: int | None, backface_culling: bool
