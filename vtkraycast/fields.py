@@ -9,7 +9,6 @@ integer ones.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 from typing import NamedTuple
 
@@ -27,7 +26,6 @@ __all__ = [
     "gather_at_hits",
     "mesh_arrays",
     "miss_value",
-    "output_bytes",
     "output_layouts",
     "request_outputs",
     "row_layout",
@@ -135,11 +133,6 @@ def row_layout(found: MeshArrays, name: str, real: type) -> tuple[np.dtype, tupl
     values = found.point.get(name)
     values = found.cell[name] if values is None else values
     return values.dtype, values.shape[1:]
-
-
-def output_bytes(found: MeshArrays, names: list[str], real: type) -> int:
-    """Bytes per ray of the output arrays ``names``."""
-    return sum(dtype.itemsize * math.prod(shape) for dtype, shape in (row_layout(found, name, real) for name in names))
 
 
 def output_layouts(

@@ -80,7 +80,7 @@ class ImagePool:
         place = tuple(tuple(np.ravel(v)) for v in image_geometry(camera, world_space)) + ((camera.nx, camera.ny),)
         with self._lock:
             for kept in list(self._kept):
-                if _observed(kept):
+                if (kept.layouts == layouts and kept is self._kept[-1]) or _observed(kept):
                     continue
                 if kept.layouts != layouts:
                     self._kept.remove(kept)  # (its arrays go back to the buffer pool)

@@ -19,7 +19,6 @@ from .fields import (
     GEOMETRY_ARRAYS,
     allocate,
     mesh_arrays,
-    output_bytes,
     output_layouts,
     request_outputs,
     row_layout,
@@ -589,7 +588,8 @@ class Scene:
         names = select_arrays(found, arrays, interpolate)
         real = _precision(precision)
         n = camera.nx * camera.ny
-        per_ray = output_bytes(found, names, real)
+        layouts = output_layouts(found, names, n, real)
+        per_ray = sum(dtype.itemsize * math.prod(shape[1:]) for dtype, shape in layouts.values())
         if n * per_ray > _MAX_OUTPUT_BYTES:
             raise MemoryError(
                 f"a {camera.nx}x{camera.ny} image needs about {n * per_ray / 2**30:.1f} GiB for its "
@@ -598,7 +598,8 @@ class Scene:
             )
         request = self._request(strategy, precision, accel, threads, backface_culling)
         shift = self._scale.shift
-        self._scale.check_origins(camera.eye[None], real, "the camera's eye")
+        eye = camera.eye.tolist()  # (one point: its extent without numpy's calls)
+        self._scale.check_origins(camera.eye[None], real, "the camera's eye", extent=(min(eye), max(eye)))
         frame = np.array(camera.frame)
         frame[0] = np.ldexp(frame[0], shift)
         request.frame = frame
@@ -607,7 +608,10 @@ class Scene:
         # window is its rays' extent.
         window = shift
         if not camera.parallel:
-            window += direction_shifts(np.array([[camera.d, camera.w, camera.h]]), bounded=True)
+            longest = max(abs(camera.d), abs(camera.w), abs(camera.h))
+            window += direction_shifts(
+                np.array([[camera.d, camera.w, camera.h]]), bounded=True, extent=(longest, longest)
+            )
         request.d, request.width, request.height = (math.ldexp(x, window) for x in (camera.d, camera.w, camera.h))
         request.shift_x, request.shift_y = (math.ldexp(float(x), window) for x in camera.shift)
         request.near, request.far = _shifted(camera.near, shift), _shifted(camera.far, shift)
@@ -617,9 +621,9 @@ class Scene:
         # of a 13 ms frog re-cast here, timed in alternation in one process).
         pool = image if isinstance(image, ImagePool) else None
         if pool is not None:
-            image, buffers = pool.image(output_layouts(found, names, n, real), camera, world_space)
+            image, buffers = pool.image(layouts, camera, world_space)
         elif out is None:
-            buffers = allocate(found, names, n, real, self._outputs)
+            buffers = self._outputs.allocate(layouts)
         else:
             buffers = {name: out[name] for name in names}
         request_outputs(request, mesh or self._mesh, found, buffers)
