@@ -34,7 +34,7 @@ import numpy as np
 
 from .buffers import BufferPool
 from .camera import Camera
-from .image import fill_image, image_geometry, place_image
+from .image import fill_image, place_image
 
 __all__ = ["ImagePool"]
 
@@ -77,7 +77,7 @@ class ImagePool:
         else a new one. Call :meth:`written` once the arrays are written."""
         import pyvista as pv
 
-        place = tuple(tuple(np.ravel(v)) for v in image_geometry(camera, world_space)) + ((camera.nx, camera.ny),)
+        place = None if world_space else (camera.nx, camera.ny)  # (None: placed at every cast)
         with self._lock:
             for kept in list(self._kept):
                 if (kept.layouts == layouts and kept is self._kept[-1]) or _observed(kept):
@@ -86,7 +86,7 @@ class ImagePool:
                     self._kept.remove(kept)  # (its arrays go back to the buffer pool)
                 elif kept is not self._kept[-1]:  # (two images take turns: see the docstring)
                     self._kept.remove(kept)
-                    if kept.place != place:
+                    if place is None or kept.place != place:
                         place_image(kept.image, camera, world_space=world_space)
                         kept.place = place
                     self._kept.append(kept)

@@ -601,7 +601,8 @@ class Scene:
         eye = camera.eye.tolist()  # (one point: its extent without numpy's calls)
         self._scale.check_origins(camera.eye[None], real, "the camera's eye", extent=(min(eye), max(eye)))
         frame = np.array(camera.frame)
-        frame[0] = np.ldexp(frame[0], shift)
+        if shift:
+            frame[0] = np.ldexp(frame[0], shift)
         request.frame = frame
         # A pinhole's window (d, w, h) scaled on its own changes no ray but the directions'
         # length: brought to about 1, as intersect's directions are. A parallel camera's
