@@ -630,12 +630,16 @@ class Scene:
         request_outputs(request, mesh or self._mesh, found, buffers)
         if image is not None and pool is None:
             fill_image(image, camera, buffers, world_space=world_space)
-        with progress_reporter(progress, progress_bar, f"Ray casting {camera.nx}x{camera.ny}") as poll:
-            request.progress = poll
-            if not _core.cast(self._core, request):
-                raise InterruptedError("the cast was aborted")
+        if progress is None and not progress_bar:  # (the core still stops on Ctrl-C)
+            done = _core.cast(self._core, request)
+        else:
+            with progress_reporter(progress, progress_bar, f"Ray casting {camera.nx}x{camera.ny}") as poll:
+                request.progress = poll
+                done = _core.cast(self._core, request)
+        if not done:
+            raise InterruptedError("the cast was aborted")
         for name in ("Depth", "Position"):
-            if name in buffers:
+            if shift and name in buffers:
                 shift_lengths(buffers[name], shift, name, distance=name == "Depth")
         if pool is not None:
             pool.written(image)
