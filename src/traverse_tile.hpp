@@ -69,6 +69,7 @@ class TileTracer {
         guess_far_.resize(n);
         guess_.resize(n);
         sure_.resize(n);
+        sure_near_.resize(n + 7);  // (settle8 writes eight at a time)
     }
 
     /// Per-pixel arrays hold a whole tile (a packet, or a flat scene's block), row by row.
@@ -481,7 +482,7 @@ class TileTracer {
                     const int64_t c = at[p][0][k], r = at[p][1][k];
                     if (double(near[k]) > depth_bound_[c + r * kStride]) return;
                     if (!fetched) scene_.prefetch_points(triangle), fetched = true;  // (for the kernel)
-                    try_pixel(c, r, triangle, far[k], sure[p] >> k & 1);
+                    try_pixel(c, r, triangle, near[k], far[k], sure[p] >> k & 1);
                 };
                 if (on[0] >> k & 1) test(0);
                 if (on[1] >> k & 1) test(1);
@@ -527,12 +528,12 @@ class TileTracer {
                 open &= may;
                 if (sure_allowed_ && sure_depths && open != 0 && (open & ~sure) == 0 &&
                     !((made_[r] | sure_bits_[r]) >> c & open)) {
-                    settle8(c, r, i, open, float(rect.far));
+                    settle8(c, r, i, open, float(rect.near), float(rect.far));
                     continue;
                 }
                 for (; open != 0; open &= open - 1) {
                     const int b = __builtin_ctz(open);
-                    try_pixel(c + b, r, i, float(rect.far), sure_depths && (sure >> b & 1));
+                    try_pixel(c + b, r, i, float(rect.near), float(rect.far), sure_depths && (sure >> b & 1));
                 }
             }
 #else
@@ -544,22 +545,23 @@ class TileTracer {
                     scene_.prefetch_points(i);  // for the kernel, while the footprint is set up
                     footprint.emplace(projected_.footprint(i));
                 }
-                if (footprint->may_cover(i0_ + c, r0_ + r)) try_pixel(c, r, i, float(rect.far), false);
+                if (footprint->may_cover(i0_ + c, r0_ + r)) try_pixel(c, r, i, float(rect.near), float(rect.far), false);
             }
 #endif
     }
 
 #if defined(__AVX2__)
     /// Settles the pixels `open` (bits) of columns c to c + 7 of row r by sure hits of
-    /// triangle i, whose depths lie below `far`, when none of them has a ray or a sure hit
-    /// yet: what try_pixel does to each (test_pixel's first sure hit, then the quads' depth
-    /// bounds), in vector lanes. A large triangle's pixels mostly go so.
-    void settle8(int64_t c, int64_t r, uint32_t i, unsigned open, float far) {
+    /// triangle i, whose depths lie within [near, far], when none of them has a ray or a
+    /// sure hit yet: what try_pixel does to each (test_pixel's first sure hit, then the
+    /// quads' depth bounds), in vector lanes. A large triangle's pixels mostly go so.
+    void settle8(int64_t c, int64_t r, uint32_t i, unsigned open, float near, float far) {
         const int64_t j = c + r * kStride;
         sure_bits_[r] |= uint64_t(open) << c;
         const __m256i bits32 = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
         const __m256i in32 = _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(int(open)), bits32), bits32);
         _mm256_maskstore_epi32(reinterpret_cast<int*>(sure_.data() + j), in32, _mm256_set1_epi32(int(i)));
+        _mm256_maskstore_ps(sure_near_.data() + j, in32, _mm256_set1_ps(near));
         const __m256i bits64 = _mm256_setr_epi64x(1, 2, 4, 8);
         const __m256d bound = _mm256_set1_pd(double(far));
         for (int half = 0; half < 2; ++half) {
@@ -572,11 +574,11 @@ class TileTracer {
     }
 #endif
 
-    /// Tests triangle i, whose depths lie below `far`, on the block's ray at column c, row
-    /// r (`sure`: surely hit, see test_pixel); on a closer hit, the depth bounds of the ray
-    /// and of its quad follow.
-    void try_pixel(int64_t c, int64_t r, uint32_t i, float far, bool sure) {
-        if (test_pixel(c, r, i, far, sure)) bound_quad(c >> 1, r >> 1);
+    /// Tests triangle i, whose depths lie within [near, far], on the block's ray at column
+    /// c, row r (`sure`: surely hit, see test_pixel); on a closer hit, the depth bounds of
+    /// the ray and of its quad follow.
+    void try_pixel(int64_t c, int64_t r, uint32_t i, float near, float far, bool sure) {
+        if (test_pixel(c, r, i, near, far, sure)) bound_quad(c >> 1, r >> 1);
     }
 
     /// The depth bound of the 2x2 quad of pixels at quad column qc, row qr: its pixels' largest.
@@ -603,20 +605,25 @@ class TileTracer {
     /// with its depth bounds, and no ray is made. A later candidate is culled when its
     /// nearest depth lies beyond the sure hit's farthest: each bound clears the exact depths
     /// by the depth slack plus 2^-21 relative, far beyond the kernel's rounding of t and its
-    /// tie tolerance, so the kernel would rank it behind. Any other candidate makes the ray,
-    /// and the kernel tests the sure hit, then it: the kernel decides every close call.
+    /// tie tolerance, so the kernel would rank it behind. By the same margins a later
+    /// candidate surely hit whose farthest depth lies before the sure hit's nearest takes
+    /// its place (a leaf's triangles come in no order of depth: on the frog's and the
+    /// channels' views, three quarters of the candidates that met a sure hit did so). Any
+    /// other candidate makes the ray, and the kernel tests the sure hit, then it: the
+    /// kernel decides every close call.
     /// When the cast asks for the hit's depth or weights, the rays of the pixels still
     /// settled so are made once the tile is traversed, and tested on their sure hit alone
     /// (complete_sure_hits).
-    bool test_pixel(int64_t c, int64_t r, uint32_t i, float far = HUGE_VALF, bool sure = false) {
+    bool test_pixel(int64_t c, int64_t r, uint32_t i, float near = -HUGE_VALF, float far = HUGE_VALF, bool sure = false) {
         const int64_t j = c + r * kStride;
         const uint64_t bit = uint64_t(1) << c;
         bool resolved = false;  // a sure hit was just tested with the kernel
         if (!(made_[r] & bit)) {
 #if defined(__AVX2__)
-            if (sure_allowed_ && sure && !(sure_bits_[r] & bit)) {
+            if (sure_allowed_ && sure && (!(sure_bits_[r] & bit) || far < sure_near_[j])) {
                 sure_bits_[r] |= bit;
                 sure_[j] = i;
+                sure_near_[j] = near;
                 depth_bound_[j] = double(far);
                 ask_point_rows(i);
                 return true;
@@ -664,6 +671,7 @@ class TileTracer {
     static constexpr bool kSureHits = false;  // (they come with the AVX2 leaf loop, which knows triangles' depths)
 #endif
     std::vector<uint32_t> sure_;   // the sure hit of each such pixel
+    std::vector<float> sure_near_;  // and a lower bound on its depth there
     uint32_t hit_prims_[kStride * kStride];  // the block's hit triangles, for finish's prefetches
     std::vector<Ray> ray_;                       // ray_, kernel_ and hit_: set for the rays made only
     /// Room for a ray's kernel (which has no default state), made over whatever was there:

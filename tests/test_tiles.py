@@ -110,6 +110,38 @@ def test_eye_inside_a_closed_mesh(offset):
     assert assert_same_as_ray_by_ray(vrc.Scene(star_mesh(cam)), cam) == 33 * 25
 
 
+def shuffled_layers(depths, tilt: float, seed: int = 3) -> pv.PolyData:
+    """Square grids of large triangles stacked along z (each tilted by ``tilt`` along x),
+    their triangles in a random order: the BVH's leaves mix the layers, so a pixel's
+    first candidate is often a layer behind another."""
+    rng = np.random.default_rng(seed)
+    layers = []
+    for z in depths:
+        grid = pv.Plane(center=(0, 0, z), i_size=2, j_size=2, i_resolution=4, j_resolution=4).triangulate()
+        grid.points[:, 2] += tilt * grid.points[:, 0]
+        layers.append(grid)
+    merged = pv.merge(layers, merge_points=False)
+    faces = merged.faces.reshape(-1, 4)[rng.permutation(merged.n_cells)]
+    return pv.PolyData(merged.points, faces.ravel())
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+@pytest.mark.parametrize(
+    ("depths", "tilt"),
+    [((0.0, 0.3, 0.6, 0.9), 0.0), ((0.0, 0.3, 0.6, 0.9), 0.4), ((0.0, 0.05, 0.1), 0.5), ((0.0, 1e-9, 0.5), 0.0)],
+    ids=["apart", "tilted", "depths overlapping", "coincident"],
+)
+def test_sure_hits_of_layers_in_any_order(depths, tilt, parallel):
+    # A candidate surely hit and surely in front of a pixel's sure hit takes its place
+    # (traverse_tile.hpp, test_pixel); one whose depths may overlap it makes the ray.
+    mesh = shuffled_layers(depths, tilt)
+    cam = vrc.Camera((0.1, 0.2, 2.6), (0.1, 0.2, 0.0), (0, 1, 0), view_angle=45.0, nx=96, ny=80, parallel=parallel)
+    if parallel:
+        cam = cam.replace(h=2.5, w=3.0)
+    hits = assert_same_as_ray_by_ray(vrc.Scene(mesh), cam)
+    assert hits > 0.5 * cam.nx * cam.ny
+
+
 @pytest.mark.parametrize(("centre", "pixel", "n"), [(4.0, 0.25, 32), (4.5, 2.0**-25, 30), (4.0, 1.0, 8), (4.0, 2.0, 4)])
 def test_rays_through_vertices_and_edges(centre, pixel, n):
     # Cameras whose pixel centres land on the grid's vertices and edges (at 1 and 2 units
