@@ -1,8 +1,8 @@
 """Images kept from a scene's casts and handed back, refilled, once nothing can observe them.
 
-Making a pyvista image, wrapping its arrays for VTK and destroying the image again took
-about 0.6 ms of every cast here (the caches cold after other work, as between a user's
-casts, or alternated with another caster's): 2 to 5 % of a 1024x1024 cast. A scene keeps
+Making a pyvista image, wrapping its arrays for VTK and destroying the image again costs
+about half a millisecond a cast when the caches are cold after other work (as between a
+user's casts), a few percent of a 1024x1024 cast. A scene keeps
 the images of its last two casts (two, as the buffer pool keeps arrays: a loop holding its
 last image finds the one before it free) and hands one back when the new cast asks for
 arrays of the same names, types and sizes, and nothing else can observe it:
@@ -18,8 +18,8 @@ arrays of the same names, types and sizes, and nothing else can observe it:
 Its arrays are then marked modified after the cast (VTK keeps their ranges until then).
 The image of the last cast is not handed back at once, even when free: two images take
 turns, as the buffer pool's arrays do. Written again right after its cast, an image's
-arrays were still partly in the last-level cache, dirty, and the cast's streaming stores
-to them took 1 to 3 % longer (frog and channels views, alternated with Open3D's casts).
+arrays are still partly in the last-level cache, dirty, and the next cast's streaming
+stores to them are slower than to arrays written a cast earlier.
 """
 
 from __future__ import annotations
