@@ -607,8 +607,8 @@ class TileTracer {
     /// by the depth slack plus 2^-21 relative, far beyond the kernel's rounding of t and its
     /// tie tolerance, so the kernel would rank it behind. By the same margins a later
     /// candidate surely hit whose farthest depth lies before the sure hit's nearest takes
-    /// its place (a leaf's triangles come in no order of depth: on the frog's and the
-    /// channels' views, three quarters of the candidates that met a sure hit did so). Any
+    /// its place (a leaf's triangles come in no order of depth, so such candidates are
+    /// common where surfaces overlap). Any
     /// other candidate makes the ray, and the kernel tests the sure hit, then it: the
     /// kernel decides every close call.
     /// When the cast asks for the hit's depth or weights, the rays of the pixels still

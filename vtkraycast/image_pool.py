@@ -1,8 +1,8 @@
 """Images kept from a scene's casts and handed back, refilled, once nothing can observe them.
 
-Making a pyvista image, wrapping its arrays for VTK and destroying the image again costs
-about half a millisecond a cast when the caches are cold after other work (as between a
-user's casts), a few percent of a 1024x1024 cast. A scene keeps
+Making a pyvista image, wrapping its arrays for VTK and destroying the image again is a
+few percent of a 1024x1024 cast when the caches are cold after other work (as between a
+user's casts). A scene keeps
 the images of its last two casts (two, as the buffer pool keeps arrays: a loop holding its
 last image finds the one before it free) and hands one back when the new cast asks for
 arrays of the same names, types and sizes, and nothing else can observe it:
@@ -80,17 +80,17 @@ class ImagePool:
         place = None if world_space else (camera.nx, camera.ny)  # (None: placed at every cast)
         with self._lock:
             for kept in list(self._kept):
+                # (the last image matching is left for the next cast: two take turns)
                 if (kept.layouts == layouts and kept is self._kept[-1]) or _observed(kept):
                     continue
+                self._kept.remove(kept)
                 if kept.layouts != layouts:
-                    self._kept.remove(kept)  # (its arrays go back to the buffer pool)
-                elif kept is not self._kept[-1]:  # (two images take turns: see the docstring)
-                    self._kept.remove(kept)
-                    if place is None or kept.place != place:
-                        place_image(kept.image, camera, world_space=world_space)
-                        kept.place = place
-                    self._kept.append(kept)
-                    return kept.image, kept.buffers
+                    continue  # (dropped: its arrays go back to the buffer pool)
+                if place is None or kept.place != place:
+                    place_image(kept.image, camera, world_space=world_space)
+                    kept.place = place
+                self._kept.append(kept)
+                return kept.image, kept.buffers
             kept = _Kept()
             kept.layouts, kept.place = layouts, place
             kept.buffers = self._buffers.allocate(layouts)

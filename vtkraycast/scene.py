@@ -618,8 +618,7 @@ class Scene:
         request.near, request.far = _shifted(camera.near, shift), _shifted(camera.far, shift)
         request.nx, request.ny, request.parallel = camera.nx, camera.ny, camera.parallel
         # The image and the arrays the core writes are set up before the cast: Python run
-        # right after a cast meets cold caches (set up after, they took 0.3 to 0.5 ms more
-        # of a 13 ms frog re-cast here, timed in alternation in one process).
+        # right after a cast meets cold caches.
         pool = image if isinstance(image, ImagePool) else None
         if pool is not None:
             image, buffers = pool.image(layouts, camera, world_space)
