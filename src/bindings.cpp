@@ -333,7 +333,7 @@ VRC_NB_MODULE(VRC_MODULE, m) {
             "enough for one camera cast).")
         .def_prop_ro("has_bvh", &vrc::Scene::has_bvh)
         .def_prop_ro("n_triangles", &vrc::Scene::n_triangles)
-        .def_prop_ro("n_nodes", [](const vrc::Scene& s) { return s.nodes.size(); })
+        .def_prop_ro("n_nodes", [](const vrc::Scene& s) { return s.binary_nodes; })
         .def_prop_ro("n_camera_nodes", [](const vrc::Scene& s) { return s.camera.nodes.size(); })
         .def_prop_ro(
             "point_bounds",

@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <new>
 #include <vector>
 
 #include "exact_sign.hpp"
@@ -76,9 +77,18 @@ struct Scene {
     /// through the triangle the kernel has just loaded and a table in the same order.
     std::vector<uint32_t> point_ids;
     std::size_t input_points = 0;     ///< points of the input mesh (point fields have a row each)
-    std::vector<Node> nodes;          ///< nodes[0] is the root; empty when there are no triangles
+    /// The binary BVH, nodes[0] the root, while the scene is built: the camera tree and the
+    /// wide nodes are made from it, then it is freed (nothing casts through it).
+    std::vector<Node> nodes;
+    std::size_t binary_nodes = 0;     ///< how many it had (0 when there are no triangles)
     CameraTree camera;                ///< the hierarchy as camera casts go through it
     std::vector<WideNode> wide;       ///< the hierarchy as single rays go through it
+    /// Its leaves' triangles as single rays' filter reads them: LeafBlocks, at the word
+    /// offsets the wide nodes give, and eight bytes of padding.
+    std::vector<std::byte> leaf_bytes;
+    /// The leaves' coordinates are scaled by this power of two (0: the scene's coordinates
+    /// lie beyond what the filter's bounds hold, and it lets every triangle through).
+    double leaf_scale = 1;
     /// Boxes are stored relative to this point (the centre of the triangles' bounding box), so
     /// their single precision resolves the scene's own size, wherever it lies in the world.
     double anchor[3] = {0, 0, 0};
@@ -90,8 +100,12 @@ struct Scene {
 
     [[nodiscard]] std::size_t n_triangles() const { return prim_ids.size(); }
     /// False for a flat scene (triangles but no hierarchy: one camera cast's worth).
-    [[nodiscard]] bool has_bvh() const { return !nodes.empty() || prim_ids.empty(); }
+    [[nodiscard]] bool has_bvh() const { return binary_nodes > 0 || prim_ids.empty(); }
     [[nodiscard]] const double* point(uint32_t i) const { return points.data() + 3 * std::size_t(i); }
+    /// The block of the leaf a wide node's lane gives as `child`.
+    [[nodiscard]] const LeafBlock& leaf(uint32_t child) const {
+        return *std::launder(reinterpret_cast<const LeafBlock*>(leaf_bytes.data() + 4 * std::size_t(child)));
+    }
     /// Row of the mesh's point arrays of corner c of triangle i (leaf order).
     [[nodiscard]] uint32_t input_point(uint32_t i, int c) const { return point_ids[triangles[3 * std::size_t(i) + c]]; }
     /// Asks the cache for triangle i's points (leaf order), ahead of a kernel reading them.
@@ -100,14 +114,16 @@ struct Scene {
     }
     /// Bytes single rays read: the wide nodes, the triangles and their points.
     [[nodiscard]] std::size_t ray_bytes() const {
-        return wide.size() * sizeof(WideNode) + triangles.size() * sizeof(uint32_t) + points.size() * sizeof(double);
+        return wide.size() * sizeof(WideNode) + leaf_bytes.size() + triangles.size() * sizeof(uint32_t) +
+               points.size() * sizeof(double);
     }
     /// Bytes held by the structure and the per-triangle data (points included), and the
     /// working memory kept from camera casts.
     [[nodiscard]] std::size_t memory_bytes() const {
         return points.size() * sizeof(double) + triangles.size() * sizeof(uint32_t) +
-               (prim_ids.size() + point_ids.size()) * sizeof(uint32_t) + nodes.size() * sizeof(Node) +
+               (prim_ids.size() + point_ids.size()) * sizeof(uint32_t) +
                camera.nodes.size() * sizeof(CameraTree::Link) + wide.size() * sizeof(WideNode) +
+               leaf_bytes.size() +
                (camera.leaf_offsets.size() + camera.leaf_points.size() + camera.point_end.size()) * sizeof(uint32_t) +
                camera.subtrees.size() * sizeof(CameraTree::Subtree) +
                (camera.top.size() + camera.shared.size()) * sizeof(uint32_t) + scratch->bytes();

@@ -859,7 +859,9 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     });
     order_points(scene, points, n_points);
     build_camera_tree(scene);
-    scene.wide = collapse_to_wide(scene);
+    build_wide(scene);
+    scene.binary_nodes = scene.nodes.size();
+    std::vector<Node>().swap(scene.nodes);
     return scene;
 }
 
@@ -1039,7 +1041,9 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     }
     order_points(scene, points, n_points);
     build_camera_tree(scene);
-    scene.wide = collapse_to_wide(scene);
+    build_wide(scene);
+    scene.binary_nodes = scene.nodes.size();
+    std::vector<Node>().swap(scene.nodes);
     return scene;
 }
 

@@ -430,8 +430,9 @@ class BundleTracer {
                     const char* next = reinterpret_cast<const char*>(&scene_.wide[node.child[c]]);
                     for (int line = 0; line < 4; ++line) prefetch_line(next + 64 * line);
                 } else {  // a leaf's point indices (its points follow when it is popped)
-                    prefetch_line(scene_.triangles.data() + 3 * std::size_t(node.child[c]));
-                    prefetch_line(scene_.triangles.data() + 3 * std::size_t(node.child[c] + node.count[c]) - 1);
+                    const uint32_t first = scene_.leaf(node.child[c]).first;
+                    prefetch_line(scene_.triangles.data() + 3 * std::size_t(first));
+                    prefetch_line(scene_.triangles.data() + 3 * std::size_t(first + node.count[c]) - 1);
                 }
                 stack[top++] = {node.child[c], node.count[c], extent[0][c], nearest[c], rects[c]};
             }
@@ -439,9 +440,9 @@ class BundleTracer {
         return true;
     }
 
-    /// Tests leaf triangles first .. first + count - 1 on the rays that may meet its box
+    /// Tests the `count` triangles of leaf `index` on the rays that may meet its box
     /// (projecting into `rect`, from `nearest` along c on).
-    void leaf(uint32_t first, uint32_t count, const Rect& rect, double nearest) {
+    void leaf(uint32_t index, uint32_t count, const Rect& rect, double nearest) {
         int n = 0;  // the rays to test (then the points are asked for: many leaves have none)
         const Double4 a0 = Double4{} + rect.a0, a1 = Double4{} + rect.a1, b0 = Double4{} + rect.b0,
                       b1 = Double4{} + rect.b1, near = Double4{} + nearest;
@@ -468,11 +469,12 @@ class BundleTracer {
         }
         if (n == 0) return;
         for (int c = n; c < n + 3; ++c) candidate_a_[c] = candidate_b_[c] = NAN;  // (outside every rectangle)
+        const uint32_t first = scene_.leaf(index).first;
         for (uint32_t i = first; i < first + count; ++i) scene_.prefetch_points(i);
         if (n > kRaysByTriangle)
             by_triangle(first, count, n);
         else
-            by_ray(first, count, n);
+            by_ray(index, first, count, n);
         update_blocks(n);
     }
 
@@ -561,16 +563,15 @@ class BundleTracer {
         }
     }
 
-    /// Few rays in a leaf's box: each ray's triangles four at a time through its filter,
-    /// as a single ray's leaf (traverse_wide.hpp).
-    void by_ray(uint32_t first, uint32_t count, int n) {
+    /// Few rays in a leaf's box: each ray's triangles through its filter, as a single ray's
+    /// leaf (traverse_wide.hpp).
+    void by_ray(uint32_t index, uint32_t first, uint32_t count, int n) {
         for (int c = 0; c < n; ++c) {
             const int j = candidates_[c];
-            if (!filter_[j]) filter_[j].emplace(ray_[j], kernel(j).shear());
+            if (!filter_[j]) filter_[j].emplace(scene_, ray_[j], kernel(j).shear());
             const double before = bound_[j], tmin = ray_[j].tmin;
-            for (uint32_t i = first, last = first + count; i < last; i += 4)
-                for (unsigned m = filter_[j]->candidates(scene_, i, std::min(4u, last - i), tmin, bound_[j]); m; m &= m - 1)
-                    test_triangle(*kernel_[j], scene_, i + __builtin_ctz(m), tmin, bound_[j], hit_[j]);
+            for (unsigned m = filter_[j]->candidates(scene_.leaf(index), count, bound_[j]); m; m &= m - 1)
+                test_triangle(*kernel_[j], scene_, first + __builtin_ctz(m), tmin, bound_[j], hit_[j]);
             changed_[j] |= bound_[j] != before;
         }
     }

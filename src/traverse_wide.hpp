@@ -15,44 +15,13 @@
 #include <vector>
 
 #include "kernel_watertight.hpp"
+#include "lanes.hpp"
 #include "traverse.hpp"
 #include "triangle_filter.hpp"
 #include "wide_bvh.hpp"
 
 namespace vrc {
 
-/// Float lanes as wide as a node: one AVX register, or two SSE registers in the baseline
-/// build.
-#if defined(__AVX__)
-using Lane8 = __m256;
-[[gnu::always_inline]] inline Lane8 lanes_set(float x) { return _mm256_set1_ps(x); }
-[[gnu::always_inline]] inline Lane8 lanes_load(const float* p) { return _mm256_load_ps(p); }
-[[gnu::always_inline]] inline Lane8 lanes_add(Lane8 a, Lane8 b) { return _mm256_add_ps(a, b); }
-[[gnu::always_inline]] inline Lane8 lanes_sub(Lane8 a, Lane8 b) { return _mm256_sub_ps(a, b); }
-[[gnu::always_inline]] inline Lane8 lanes_mul(Lane8 a, Lane8 b) { return _mm256_mul_ps(a, b); }
-[[gnu::always_inline]] inline Lane8 lanes_max(Lane8 a, Lane8 b) { return _mm256_max_ps(a, b); }
-[[gnu::always_inline]] inline Lane8 lanes_min(Lane8 a, Lane8 b) { return _mm256_min_ps(a, b); }
-[[gnu::always_inline]] inline void lanes_store(float* p, Lane8 a) { _mm256_store_ps(p, a); }
-[[gnu::always_inline]] inline unsigned lanes_le(Lane8 a, Lane8 b) { return unsigned(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LE_OQ))); }
-#else
-struct Lane8 {
-    __m128 lo, hi;
-};
-[[gnu::always_inline]] inline Lane8 lanes_set(float x) { return {_mm_set1_ps(x), _mm_set1_ps(x)}; }
-[[gnu::always_inline]] inline Lane8 lanes_load(const float* p) { return {_mm_load_ps(p), _mm_load_ps(p + 4)}; }
-[[gnu::always_inline]] inline Lane8 lanes_add(Lane8 a, Lane8 b) { return {_mm_add_ps(a.lo, b.lo), _mm_add_ps(a.hi, b.hi)}; }
-[[gnu::always_inline]] inline Lane8 lanes_sub(Lane8 a, Lane8 b) { return {_mm_sub_ps(a.lo, b.lo), _mm_sub_ps(a.hi, b.hi)}; }
-[[gnu::always_inline]] inline Lane8 lanes_mul(Lane8 a, Lane8 b) { return {_mm_mul_ps(a.lo, b.lo), _mm_mul_ps(a.hi, b.hi)}; }
-[[gnu::always_inline]] inline Lane8 lanes_max(Lane8 a, Lane8 b) { return {_mm_max_ps(a.lo, b.lo), _mm_max_ps(a.hi, b.hi)}; }
-[[gnu::always_inline]] inline Lane8 lanes_min(Lane8 a, Lane8 b) { return {_mm_min_ps(a.lo, b.lo), _mm_min_ps(a.hi, b.hi)}; }
-[[gnu::always_inline]] inline void lanes_store(float* p, Lane8 a) {
-    _mm_store_ps(p, a.lo);
-    _mm_store_ps(p + 4, a.hi);
-}
-[[gnu::always_inline]] inline unsigned lanes_le(Lane8 a, Lane8 b) {
-    return unsigned(_mm_movemask_ps(_mm_cmple_ps(a.lo, b.lo))) | unsigned(_mm_movemask_ps(_mm_cmple_ps(a.hi, b.hi))) << 4;
-}
-#endif
 static_assert(WideNode::kWidth == 8, "a node's lanes are eight floats");
 
 /// Slab tests of a wide node's boxes in float. Conservative as in Ize, "Robust BVH Ray
@@ -196,10 +165,11 @@ class WideSearch {
     /// scene by meets none, and making them (the shear's three divisions) cost such a ray
     /// as much as its node tests.
     struct LeafTests {
-        LeafTests(const Ray& ray, const CastContext& context) : kernel(ray, context), filter(filter_for(ray, kernel)) {}
-        static Filter filter_for(const Ray& ray, const Kernel<Real>& kernel) {
+        LeafTests(const Scene& scene, const Ray& ray, const CastContext& context)
+            : kernel(ray, context), filter(filter_for(scene, ray, kernel)) {}
+        static Filter filter_for(const Scene& scene, const Ray& ray, const Kernel<Real>& kernel) {
             if constexpr (kFiltered)
-                return TriangleFilter(ray, kernel.shear());
+                return TriangleFilter(scene, ray, kernel.shear());
             else
                 return NoFilter{};
         }
@@ -217,32 +187,60 @@ class WideSearch {
     /// a step may instead be one of a leaf's. False when the search is over.
     bool step() {
         if constexpr (kStaged) {
-            if (leaf_stage_ == 1) {  // the leaf's point indices are in cache: ask for its points
-                for (uint32_t i = leaf_.child, end = leaf_.child + leaf_.count; i < end; ++i) scene_.prefetch_points(i);
+            if (leaf_stage_ == 1) {  // the leaf's block is in cache: filter, ask for the candidates' point indices
+                leaf_candidates_ = candidates(leaf_.child, leaf_.count);
+                if (!leaf_candidates_) {
+                    leaf_stage_ = 0;
+                    return pop();
+                }
+                const uint32_t first = scene_.leaf(leaf_.child).first;
+                for (unsigned m = leaf_candidates_; m; m &= m - 1)
+                    prefetch_line(scene_.triangles.data() + 3 * std::size_t(first + __builtin_ctz(m)));
                 leaf_stage_ = 2;
                 return true;
             }
-            if (leaf_stage_ == 2) {
+            if (leaf_stage_ == 2) {  // then their points
+                const uint32_t first = scene_.leaf(leaf_.child).first;
+                for (unsigned m = leaf_candidates_; m; m &= m - 1) scene_.prefetch_points(first + __builtin_ctz(m));
+                leaf_stage_ = 3;
+                return true;
+            }
+            if (leaf_stage_ == 3) {
                 leaf_stage_ = 0;
-                return !leaf(leaf_.child, leaf_.count) && pop();
+                return !test_leaf(leaf_.child, leaf_candidates_) && pop();
             }
         }
         const WideNode& node = scene_.wide[node_];
         ++nodes_;
         alignas(32) float enter[WideNode::kWidth];
         unsigned mask = lanes_.test(node, enter);
-        // The entered lanes go on the stack farthest first, so the nearest is popped first.
-        // Every hit wanted, any order does; any hit, too: a search stops at the first found,
-        // wherever it lies, and sorting cost more than finding a nearer one first saved.
-        // Each entered lane's place is counted, not searched for: the entered lanes farther
-        // than it, and those as far before it (an insertion sort's compares on the distances
-        // defeated the branch predictor); without sorting, those before it. The last placed
-        // (the nearest) is gone on to at once: its slot, just above the stack's top, is
-        // written but not kept.
         if (!mask) return pop();
-#if defined(__AVX2__)
-        const __m256 keys = _mm256_blendv_ps(_mm256_set1_ps(-HUGE_VALF), _mm256_load_ps(enter), lane_mask(mask));
-#endif
+        // The entered lanes go on the stack farthest first, so the nearest is popped first,
+        // and the nearest is gone on to at once (its slot, just above the stack's top, is
+        // written but not kept). Every hit wanted, any order does; any hit, too (a search
+        // stops at the first found, wherever it lies), but the order costs little here.
+#if defined(__AVX2__) && !defined(VRC_OLD_STEP)
+        // Without a branch per lane (whether and where a lane goes follows no pattern the
+        // predictor learns): the lanes sorted by a sorting network on keys that carry their
+        // lane number, the nearest found apart by a shorter reduction (the next node's load
+        // waits for it, not for the sort).
+        const __m256 entry = _mm256_load_ps(enter);
+        const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        // (non-negative floats order as their bits; the low three bits of the key give way
+        // to the lane, which orders only: the stack keeps the exact entries)
+        const __m256i bits = _mm256_castps_si256(_mm256_max_ps(entry, _mm256_setzero_ps()));
+        const __m256i key = _mm256_blendv_epi8(_mm256_set1_epi32(-1), _mm256_or_si256(_mm256_andnot_si256(_mm256_set1_epi32(7), bits), lane),
+                                               _mm256_castps_si256(lane_mask(mask)));
+        const int nearest = nearest_lane(key);
+        const __m256i order = _mm256_and_si256(sort_descending(key), _mm256_set1_epi32(7));
+        const std::size_t base = top_;
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(stack_child_ + base),
+                            _mm256_permutevar8x32_epi32(_mm256_load_si256(reinterpret_cast<const __m256i*>(node.child)), order));
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(stack_count_ + base),
+                            _mm256_permutevar8x32_epi32(_mm256_load_si256(reinterpret_cast<const __m256i*>(node.count)), order));
+        _mm256_storeu_ps(stack_enter_ + base, _mm256_permutevar8x32_ps(entry, order));
+        top_ += std::size_t(__builtin_popcount(mask) - 1);
+#else
         const std::size_t base = top_;
         const int last = __builtin_popcount(mask) - 1;
         top_ += std::size_t(last);
@@ -250,24 +248,25 @@ class WideSearch {
         for (unsigned rest = mask; rest; rest &= rest - 1) {
             const int c = __builtin_ctz(rest);
             const unsigned before = mask & ((1u << c) - 1);
-            unsigned farther = before;
-            if constexpr (kPolicy == HitPolicy::closest) {
 #if defined(__AVX2__)
-                const __m256 key = _mm256_set1_ps(enter[c]);
-                farther = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_GT_OQ))) |
-                          (unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_EQ_OQ))) & before);
+            const __m256 keys = _mm256_blendv_ps(_mm256_set1_ps(-HUGE_VALF), _mm256_load_ps(enter), lane_mask(mask));
+            const __m256 key = _mm256_set1_ps(enter[c]);
+            const unsigned farther = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_GT_OQ))) |
+                      (unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_EQ_OQ))) & before);
 #else
-                farther = 0;
-                for (unsigned m = mask; m; m &= m - 1) {
-                    const int d = __builtin_ctz(m);
-                    farther |= unsigned(enter[d] > enter[c] || (enter[d] == enter[c] && d < c)) << d;
-                }
-#endif
+            unsigned farther = 0;
+            for (unsigned m = mask; m; m &= m - 1) {
+                const int d = __builtin_ctz(m);
+                farther |= unsigned(enter[d] > enter[c] || (enter[d] == enter[c] && d < c)) << d;
             }
+#endif
             const int place = __builtin_popcount(farther);
-            push(node, c, enter[c], base + std::size_t(place));
+            const std::size_t at = base + std::size_t(place);
+            prefetch_child(node, c);
+            stack_child_[at] = node.child[c], stack_count_[at] = node.count[c], stack_enter_[at] = enter[c];
             nearest = place == last ? c : nearest;
         }
+#endif
         const After after = take({node.child[nearest], node.count[nearest], enter[nearest]});
         return after == After::pop ? pop() : after == After::step;
     }
@@ -277,25 +276,54 @@ class WideSearch {
     [[nodiscard]] unsigned nodes() const { return nodes_; }
 
    private:
-    /// Puts lane c of `node` at stack place `at`, and asks memory for what it leads to: a
-    /// node (its bounds span its four cache lines) or a leaf's point indices (chosen
-    /// without a branch: whether a lane is a leaf follows no pattern the predictor learns).
-    [[gnu::always_inline]] void push(const WideNode& node, int c, float enter, std::size_t at) {
-        const uint32_t child = node.child[c], count = node.count[c];
-        // (addresses as integers: the one not chosen may lie outside its array)
-        const uintptr_t as_node = reinterpret_cast<uintptr_t>(scene_.wide.data()) + sizeof(WideNode) * child;
-        const uintptr_t as_leaf = reinterpret_cast<uintptr_t>(scene_.triangles.data()) + 3 * sizeof(uint32_t) * child;
-        const char* next = reinterpret_cast<const char*>(count == 0 ? as_node : as_leaf);
-        for (int line = 0; line < 4; ++line) prefetch_line(next + 64 * line);
-        stack_[at] = {child, count, enter};
-    }
 #if defined(__AVX2__)
     /// The lanes whose bits are set in `bits`, as all-ones lanes.
     static __m256 lane_mask(unsigned bits) {
         const __m256i bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
         return _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(int(bits)), bit), bit));
     }
+    /// The lane of the least key (unsigned: the lanes left out, -1, are the greatest).
+    [[gnu::always_inline]] static int nearest_lane(__m256i key) {
+        __m256i m = _mm256_min_epu32(key, _mm256_shuffle_epi32(key, 0xB1));
+        m = _mm256_min_epu32(m, _mm256_shuffle_epi32(m, 0x4E));
+        return _mm_cvtsi128_si32(_mm_min_epu32(_mm256_castsi256_si128(m), _mm256_extracti128_si256(m, 1))) & 7;
+    }
+    /// One layer of a sorting network: each lane against the lane `partner` takes it to,
+    /// the greater kept in the lanes whose bits `greater` sets (signed keys).
+    template <int kGreater>
+    [[gnu::always_inline]] static __m256i exchange(__m256i v, __m256i partner) {
+        return _mm256_blend_epi32(_mm256_min_epi32(v, partner), _mm256_max_epi32(v, partner), kGreater);
+    }
+    /// Eight signed keys in descending order: Batcher's bitonic network (two halves
+    /// sorted opposite ways, then merged), six layers.
+    [[gnu::always_inline]] static __m256i sort_descending(__m256i v) {
+        const auto pairs = [](__m256i x) { return _mm256_shuffle_epi32(x, 0xB1); };   // 1 0 3 2
+        const auto twos = [](__m256i x) { return _mm256_shuffle_epi32(x, 0x4E); };    // 2 3 0 1
+        const auto halves = [](__m256i x) { return _mm256_permute2x128_si256(x, x, 1); };
+        v = exchange<0x99>(v, pairs(v));
+        v = exchange<0xC3>(v, twos(v));
+        v = exchange<0xA5>(v, pairs(v));
+        v = exchange<0x0F>(v, halves(v));
+        v = exchange<0x33>(v, twos(v));
+        return exchange<0x55>(v, pairs(v));
+    }
 #endif
+
+    /// Asks memory for what lane c of `node` leads to: a node or a leaf's block (chosen
+    /// without a branch: whether a lane is a leaf follows no pattern the predictor learns).
+    [[gnu::always_inline]] void prefetch_child(const WideNode& node, int c) const {
+        const uint32_t child = node.child[c];
+        // (addresses as integers: the one not chosen may lie outside its array)
+        const uintptr_t as_node = reinterpret_cast<uintptr_t>(scene_.wide.data()) + sizeof(WideNode) * child;
+        const uintptr_t as_leaf = reinterpret_cast<uintptr_t>(scene_.leaf_bytes.data()) + 4 * std::size_t(child);
+        prefetch_block(reinterpret_cast<const char*>(node.count[c] == 0 ? as_node : as_leaf));
+    }
+
+    /// Asks memory for a wide node or a leaf's block at `p` (four lines hold either).
+    [[gnu::always_inline]] static void prefetch_block(const char* p) {
+        static_assert(sizeof(WideNode) == 256 && LeafBlock::bytes(WideNode::kWidth) <= 193, "four lines hold either, wherever it starts");
+        for (int line = 0; line < 4; ++line) prefetch_line(p + 64 * line);
+    }
 
     /// Pops the next node the ray may meet before the closest hit so far; the leaves popped
     /// on the way are tested, or, staged, the first of them is asked for from memory and
@@ -306,8 +334,8 @@ class WideSearch {
             do {
                 if (top_ == 0) return false;
                 --top_;
-            } while (lanes_.beyond(stack_[top_].enter));
-            const After after = take(stack_[top_]);
+            } while (lanes_.beyond(stack_enter_[top_]));
+            const After after = take({stack_child_[top_], stack_count_[top_], stack_enter_[top_]});
             if (after != After::pop) return after == After::step;
         }
     }
@@ -323,45 +351,49 @@ class WideSearch {
     After take(const Pending& next) {
         if (next.count == 0) {
             node_ = next.child;
+            // (staged, other searches' steps come before this node's test)
+            if constexpr (kStaged) prefetch_block(reinterpret_cast<const char*>(&scene_.wide[next.child]));
             return After::step;
         }
         if constexpr (kStaged) {
             leaf_ = next;
             leaf_stage_ = 1;
-            prefetch_line(scene_.triangles.data() + 3 * std::size_t(next.child));
-            prefetch_line(scene_.triangles.data() + 3 * std::size_t(next.child + next.count) - 1);
+            prefetch_block(reinterpret_cast<const char*>(&scene_.leaf(next.child)));
             return After::step;
         } else {
             return leaf(next.child, next.count) ? After::stop : After::pop;
         }
     }
 
-    /// Tests leaf triangles first .. first + count - 1; true when the search is over (any hit).
-    bool leaf(uint32_t first, uint32_t count) {
-        if (!tests_) tests_.emplace(ray_, context_);
+    /// Tests the `count` triangles of leaf `index`; true when the search is over (any hit).
+    bool leaf(uint32_t index, uint32_t count) { return test_leaf(index, candidates(index, count)); }
+
+    /// The leaf's triangles that may meet the ray, as bits: those the filter leaves, or
+    /// (other kernels) all.
+    unsigned candidates(uint32_t index, uint32_t count) {
+        if (!tests_) tests_.emplace(scene_, ray_, context_);
+        if constexpr (kFiltered)
+            return tests_->filter.candidates(scene_.leaf(index), count, bound_);
+        else
+            return (1u << count) - 1;
+    }
+
+    /// Tests the leaf's triangles whose bits `m` holds; true when the search is over (any hit).
+    bool test_leaf(uint32_t index, unsigned m) {
         const Kernel<Real>& kernel = tests_->kernel;
-        const Filter& filter = tests_->filter;
         const double before = bound_;
         const double tmin = ray_.tmin;
-        if constexpr (kFiltered) {
-            for (uint32_t i = first, end = first + count; i < end; i += 4) {
-                for (unsigned m = filter.candidates(scene_, i, std::min(4u, end - i), tmin, bound_); m; m &= m - 1) {
-                    const uint32_t k = i + __builtin_ctz(m);
-                    if constexpr (kPolicy == HitPolicy::all) {
-                        double t;
-                        Real b[3];
-                        if (kernel.test(scene_, k, tmin, bound_, t, b)) (*sink_)(k, t, b);
-                        continue;
-                    }
-                    test_triangle(kernel, scene_, k, tmin, bound_, hit_);
-                    if (kPolicy == HitPolicy::any && hit_.found()) return true;
-                }
+        const uint32_t first = scene_.leaf(index).first;
+        for (; m; m &= m - 1) {
+            const uint32_t k = first + __builtin_ctz(m);
+            if constexpr (kPolicy == HitPolicy::all) {
+                double t;
+                Real b[3];
+                if (kernel.test(scene_, k, tmin, bound_, t, b)) (*sink_)(k, t, b);
+                continue;
             }
-        } else {
-            for (uint32_t i = first, end = first + count; i < end; ++i) {
-                test_triangle(kernel, scene_, i, tmin, bound_, hit_);
-                if (kPolicy == HitPolicy::any && hit_.found()) return true;
-            }
+            test_triangle(kernel, scene_, k, tmin, bound_, hit_);
+            if (kPolicy == HitPolicy::any && hit_.found()) return true;
         }
         if (bound_ != before) lanes_.set_bound(bound_);
         return false;
@@ -378,9 +410,13 @@ class WideSearch {
     uint32_t node_ = 0;  // the next node to test: the root first
     Pending leaf_{};     // the next leaf to test, when leaf_stage_ is not 0
     int leaf_stage_ = 0;
+    unsigned leaf_candidates_ = 0;  // staged: the leaf's triangles its filter left
     unsigned nodes_ = 0;
     std::size_t top_ = 0;  // (not int: the stack's uint32_t stores could alias it)
-    Pending stack_[WideNode::kWidth * 128];  // (at most seven pushed per level, under 96 levels)
+    // (at most seven pushed per level, under 96 levels; eight more: all eight lanes are stored)
+    static constexpr std::size_t kStack = WideNode::kWidth * 129;
+    alignas(32) uint32_t stack_child_[kStack], stack_count_[kStack];
+    alignas(32) float stack_enter_[kStack];
 };
 
 /// The traversal for one ray: float lanes when its numbers allow, double lanes otherwise.

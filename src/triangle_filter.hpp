@@ -1,115 +1,110 @@
-// Four triangles against one ray in the lanes of AVX registers: which certainly miss it.
+// A leaf's eight triangles against one ray in eight float lanes: which certainly miss it.
 // A leaf's triangles go through this first; only the rest meet the exact kernel.
 #pragma once
 
-#include <immintrin.h>
-
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <limits>
-#include <utility>
 
 #include "bvh.hpp"
 #include "geometry.hpp"
+#include "lanes.hpp"
 
 namespace vrc {
 
-/// The watertight test's edge functions (Woop, Benthin and Wald, JCGT 2013) in double for
-/// four triangles at once. A lane is rejected only when the answer is certain: two edge
-/// functions of opposite signs, each larger than its rounding-error bound (then their
-/// signs are the exact ones, which every kernel here also finds, kernel_watertight.hpp),
-/// or all three vertices' depths along the ray beyond [tmin, bound] by far more than any
-/// kernel's rounding of t (relative 2^-9). Everything else, hits and
-/// near-misses alike, goes on to the kernel, so results are the kernel's, bit for bit.
-/// In double, not in eight float lanes: the bound grows with a triangle's distance from the
-/// ray's origin (the sheared coordinates' magnitudes), and in single precision it lets
-/// through most of a large mesh's small, distant triangles.
-#if defined(__AVX__)
+/// The watertight test's edge functions (Woop, Benthin and Wald, JCGT 2013) in single
+/// precision for a leaf's triangles (LeafBlock: coordinates relative to the scene's anchor,
+/// scaled into [-1, 1], quantized within the leaf's box). A lane is rejected only when the
+/// answer is certain: two edge functions of opposite signs, each larger than its error
+/// bound (then the exact edge functions, of the double points and the kernel's own shear,
+/// have those signs, which every kernel here also finds, kernel_watertight.hpp), or all
+/// three corners' depths along the ray beyond [tmin, bound] by more than any kernel's
+/// rounding of t (relative 2^-9) and their own errors. Everything else goes on to the
+/// kernel, so results are the kernel's, bit for bit.
+///
+/// The bounds. With u = 2^-24, e the leaf's quantization error and P a bound on every
+/// coordinate relative to the ray's origin (1, the scene's scaled reach, plus the scaled
+/// origin's distance from the anchor), a corner's coordinate relative to the origin
+/// carries at most 5u P + e (the origin's rounding to float, the leaf corner's difference
+/// to it, the product and sum of the dequantization), and a sheared coordinate
+/// x = p_x - s_x p_z (|s_x| <= 1, rounded to float) at most 14u P + 2e: d = 16u P + 4e
+/// bounds it. An edge function x_i y_j - y_i x_j then differs from the exact one by at most
+/// d (S_i + S_j) + 2 d^2 + 2.01u S_i S_j, with S = |x| + |y| of the computed coordinates;
+/// the filter takes 4 d^2 and 4u for the last two (the bound's own roundings are covered by
+/// the margins of the factors). A depth s_z p_z (|s_z| <= 1) carries at most 7u P + e; the
+/// filter takes 16u P + 2e and a relative 2^-8. The error grows with the distance from the
+/// ray's origin only through P, an absolute bound: a small triangle far from the origin is
+/// decided as surely as a near one (bounds from the edge functions' magnitudes, as in the
+/// kernel, would not allow it).
 class TriangleFilter {
    public:
-    TriangleFilter(const Ray& ray, const Shear& shear) {
-        axis_[0] = shear.kx;
-        axis_[1] = shear.ky;
-        axis_[2] = shear.kz;
-        for (int k = 0; k < 3; ++k) org_[k] = _mm256_set1_pd(ray.org[k]);
-        sx_ = _mm256_set1_pd(shear.sx);
-        sy_ = _mm256_set1_pd(shear.sy);
-        sz_ = _mm256_set1_pd(shear.sz);
+    TriangleFilter(const Scene& scene, const Ray& ray, const Shear& shear) {
+        const double scale = scene.leaf_scale;
+        const int axis[3] = {shear.kx, shear.ky, shear.kz};
+        float reach = 0;
+        for (int k = 0; k < 3; ++k) {
+            axis_[k] = axis[k];
+            org_[k] = static_cast<float>((ray.org[axis[k]] - scene.anchor[axis[k]]) * scale);
+            reach = std::max(reach, std::fabs(org_[k]));
+        }
+        // Beyond these the bounds could overflow (or the scale is off): every lane goes on
+        // to the kernel. (|sx|, |sy| <= 1 by the choice of kz.)
+        usable_ = scale > 0 && reach < 0x1p40f && std::fabs(shear.sz) <= 1;
+        delta_ = 0x1p-20f * (1 + reach) * (1 + 0x1p-20f);
+        sx_ = lanes_set(static_cast<float>(shear.sx));
+        sy_ = lanes_set(static_cast<float>(shear.sy));
+        sz_ = lanes_set(static_cast<float>(shear.sz));
+        scale_ = scale;
+        tmin_ = lanes_set(round_down(ray.tmin * scale));
     }
 
-    /// Bits of the lanes among triangles first .. first + n - 1 (n <= 4, leaf order) that
-    /// may meet the ray with tmin <= t <= bound.
-    [[nodiscard, gnu::always_inline]] unsigned candidates(const Scene& scene, uint32_t first, uint32_t n, double tmin, double bound) const {
-        __m256d p[3][3];  // [vertex][axis: the ray's kx, ky, kz], relative to the origin
-        const uint32_t* tri = scene.triangles.data() + 3 * std::size_t(first);
+    /// Bits of the lanes among the first `n` of `block` that may meet the ray with
+    /// tmin <= t <= bound.
+    [[nodiscard, gnu::always_inline]] unsigned candidates(const LeafBlock& block, uint32_t n, double bound) const {
+        const unsigned all = (1u << n) - 1;
+        if (!usable_) return all;
+        Lane8 x[3], y[3], s[3], z[3];
+        const Lane8 step[3] = {lanes_set(block.step[axis_[0]]), lanes_set(block.step[axis_[1]]), lanes_set(block.step[axis_[2]])};
+        const Lane8 corner[3] = {lanes_set(block.lo[axis_[0]] - org_[0]), lanes_set(block.lo[axis_[1]] - org_[1]),
+                                 lanes_set(block.lo[axis_[2]] - org_[2])};
         for (int v = 0; v < 3; ++v) {
-            __m256d rows[4];
-            for (uint32_t lane = 0; lane < 4; ++lane)  // (missing lanes repeat the first triangle)
-                rows[lane] = _mm256_maskload_pd(scene.point(tri[3 * (lane < n ? lane : 0) + v]), kXyz);
-            const __m256d t0 = _mm256_unpacklo_pd(rows[0], rows[1]), t1 = _mm256_unpackhi_pd(rows[0], rows[1]);
-            const __m256d t2 = _mm256_unpacklo_pd(rows[2], rows[3]), t3 = _mm256_unpackhi_pd(rows[2], rows[3]);
-            const __m256d xyz[3] = {_mm256_permute2f128_pd(t0, t2, 0x20), _mm256_permute2f128_pd(t1, t3, 0x20),
-                                    _mm256_permute2f128_pd(t0, t2, 0x31)};
-            for (int k = 0; k < 3; ++k) p[v][k] = _mm256_sub_pd(xyz[axis_[k]], org_[axis_[k]]);
+            const Lane8 px = lanes_fmadd(lanes_load_u8(block.row(3 * v + axis_[0], n)), step[0], corner[0]);
+            const Lane8 py = lanes_fmadd(lanes_load_u8(block.row(3 * v + axis_[1], n)), step[1], corner[1]);
+            const Lane8 pz = lanes_fmadd(lanes_load_u8(block.row(3 * v + axis_[2], n)), step[2], corner[2]);
+            x[v] = lanes_fnmadd(sx_, pz, px);
+            y[v] = lanes_fnmadd(sy_, pz, py);
+            s[v] = lanes_add(lanes_abs(x[v]), lanes_abs(y[v]));
+            z[v] = lanes_mul(sz_, pz);
         }
-        __m256d sxv[3], syv[3], mx[3], my[3];  // sheared coordinates and their magnitudes
-        for (int v = 0; v < 3; ++v) {
-            const __m256d zx = _mm256_mul_pd(sx_, p[v][2]), zy = _mm256_mul_pd(sy_, p[v][2]);
-            sxv[v] = _mm256_sub_pd(p[v][0], zx);
-            syv[v] = _mm256_sub_pd(p[v][1], zy);
-            mx[v] = _mm256_add_pd(abs(p[v][0]), abs(zx));
-            my[v] = _mm256_add_pd(abs(p[v][1]), abs(zy));
-        }
+        const float d = delta_ + 4 * block.error;
+        const Lane8 delta = lanes_set(d), delta2 = lanes_set(4 * d * d), rounding = lanes_set(0x1p-22f);
         // u: edge (c, b), v: (a, c), w: (b, a), as the kernel pairs them
         const int pairs[3][2] = {{2, 1}, {0, 2}, {1, 0}};
-        __m256d edge[3], negative = _mm256_setzero_pd(), positive = _mm256_setzero_pd();
-        const __m256d bound_factor = _mm256_set1_pd(kEdgeBound);
-        for (int e = 0; e < 3; ++e) {
-            const int i = pairs[e][0], j = pairs[e][1];
-            edge[e] = _mm256_sub_pd(_mm256_mul_pd(sxv[i], syv[j]), _mm256_mul_pd(syv[i], sxv[j]));
-            const __m256d scale = _mm256_add_pd(_mm256_mul_pd(mx[i], my[j]), _mm256_mul_pd(my[i], mx[j]));
-            const __m256d margin = _mm256_mul_pd(bound_factor, scale);
-            negative = _mm256_or_pd(negative, _mm256_cmp_pd(edge[e], _mm256_sub_pd(_mm256_setzero_pd(), margin), _CMP_LT_OQ));
-            positive = _mm256_or_pd(positive, _mm256_cmp_pd(edge[e], margin, _CMP_GT_OQ));
+        Lane8 negative = lanes_set(0.0f), positive = negative;
+        for (const auto& pair : pairs) {
+            const int i = pair[0], j = pair[1];
+            const Lane8 edge = lanes_fmsub(x[i], y[j], lanes_mul(y[i], x[j]));
+            const Lane8 margin = lanes_fmadd(lanes_mul(rounding, s[i]), s[j], lanes_fmadd(delta, lanes_add(s[i], s[j]), delta2));
+            negative = lanes_or(negative, lanes_lt(edge, lanes_neg(margin)));
+            positive = lanes_or(positive, lanes_lt(margin, edge));
         }
-        const __m256d crossing = _mm256_and_pd(negative, positive);
-        // A hit's t is the average of the vertices' depths (sz times their kz offsets)
-        // weighted by its barycentric coordinates: it lies between the least and the greatest.
-        __m256d near = _mm256_mul_pd(sz_, p[0][2]), far = near;
-        for (int v = 1; v < 3; ++v) {
-            const __m256d z = _mm256_mul_pd(sz_, p[v][2]);
-            near = _mm256_min_pd(near, z);
-            far = _mm256_max_pd(far, z);
-        }
-        const __m256d relative = _mm256_set1_pd(kDepthBound);
-        const __m256d before = _mm256_cmp_pd(_mm256_add_pd(far, _mm256_mul_pd(relative, abs(far))), _mm256_set1_pd(tmin), _CMP_LT_OQ);
-        const __m256d after = _mm256_cmp_pd(_mm256_sub_pd(near, _mm256_mul_pd(relative, abs(near))), _mm256_set1_pd(bound), _CMP_GT_OQ);
-        const __m256d rejected = _mm256_or_pd(crossing, _mm256_or_pd(before, after));
-        return ~unsigned(_mm256_movemask_pd(rejected)) & ((1u << n) - 1);
+        // A hit's t is the average of the corners' depths weighted by its barycentric
+        // coordinates: it lies between the least and the greatest.
+        const Lane8 near = lanes_min(lanes_min(z[0], z[1]), z[2]), far = lanes_max(lanes_max(z[0], z[1]), z[2]);
+        const Lane8 relative = lanes_set(0x1p-8f), slack = lanes_set(delta_ + 2 * block.error);
+        const Lane8 before = lanes_lt(lanes_add(far, lanes_fmadd(relative, lanes_abs(far), slack)), tmin_);
+        const Lane8 after = lanes_lt(lanes_set(round_up(bound * scale_)), lanes_sub(near, lanes_fmadd(relative, lanes_abs(near), slack)));
+        const Lane8 rejected = lanes_or(lanes_and(negative, positive), lanes_or(before, after));
+        return ~lanes_bits(rejected) & all;
     }
 
    private:
-    /// Each sheared coordinate carries at most about 4 ulps of its magnitude (the
-    /// difference to the origin, the shear's product and difference), an edge function about
-    /// 10 of its scale: 16 eps bounds it with a wide margin, as in the kernel.
-    static constexpr double kEdgeBound = 16 * std::numeric_limits<double>::epsilon();
-    /// The depths carry three roundings; a kernel's t (float or double) at most about 10^3
-    /// float ulps of itself before it is refined in double (kernel_watertight.hpp).
-    static constexpr double kDepthBound = 0x1p-9;
-    static inline const __m256i kXyz = _mm256_setr_epi64x(-1, -1, -1, 0);
-    static __m256d abs(__m256d x) { return _mm256_andnot_pd(_mm256_set1_pd(-0.0), x); }
-    int axis_[3];
-    __m256d org_[3], sx_, sy_, sz_;
+    int axis_[3];      ///< the shear's kx, ky, kz
+    float org_[3];     ///< the ray's origin along them, relative to the anchor, scaled
+    float delta_;      ///< 16u P
+    Lane8 sx_, sy_, sz_, tmin_;
+    double scale_ = 1;
+    bool usable_ = true;
 };
-#else
-/// Without AVX every triangle of a leaf meets the kernel (the same answers, more tests).
-class TriangleFilter {
-   public:
-    TriangleFilter(const Ray&, const Shear&) {}
-    [[nodiscard]] unsigned candidates(const Scene&, uint32_t, uint32_t n, double, double) const {
-        return (1u << n) - 1;
-    }
-};
-#endif
 
 }  // namespace vrc

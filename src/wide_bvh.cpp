@@ -2,15 +2,58 @@
 #include "wide_bvh.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
+#include <stdexcept>
 
 #include "bvh.hpp"
+#include "geometry.hpp"
 
 namespace vrc {
 namespace {
 
+/// Appends the block of leaf `node` (triangles in leaf order) and returns its word offset.
+uint32_t add_leaf(Scene& scene, const Node& node) {
+    const uint32_t n = node.count;
+    if (n > WideNode::kWidth) throw std::logic_error("a BVH leaf holds more than eight triangles");
+    std::vector<std::byte>& bytes = scene.leaf_bytes;
+    const std::size_t at = bytes.size();
+    if (at / 4 > UINT32_MAX) throw std::length_error("too many triangles for the single-ray leaves");
+    bytes.resize(at + LeafBlock::bytes(n));
+    LeafBlock& block = *new (bytes.data() + at) LeafBlock{};
+    uint8_t* q = reinterpret_cast<uint8_t*>(&block + 1);
+    block.first = node.index;
+    double scaled[3][3][WideNode::kWidth];  // (exact up to a rounding of 2^-53)
+    for (uint32_t c = 0; c < n; ++c)
+        for (int v = 0; v < 3; ++v) {
+            const double* p = scene.point(scene.triangles[3 * std::size_t(node.index + c) + v]);
+            for (int k = 0; k < 3; ++k) scaled[v][k][c] = (p[k] - scene.anchor[k]) * scene.leaf_scale;
+        }
+    double error = 0;
+    for (int k = 0; k < 3; ++k) {
+        double lo = HUGE_VAL, hi = -HUGE_VAL;
+        for (int v = 0; v < 3; ++v)
+            for (uint32_t c = 0; c < n; ++c) lo = std::min(lo, scaled[v][k][c]), hi = std::max(hi, scaled[v][k][c]);
+        block.lo[k] = round_down(lo);
+        block.step[k] = round_up((hi - double(block.lo[k])) / 255);
+        for (int v = 0; v < 3; ++v)
+            for (uint32_t c = 0; c < n; ++c) {
+                const double x = scaled[v][k][c];
+                const double level = block.step[k] > 0 ? std::nearbyint((x - block.lo[k]) / block.step[k]) : 0;
+                const uint8_t byte = uint8_t(std::clamp(level, 0.0, 255.0));
+                q[(3 * v + k) * n + c] = byte;
+                // (this difference's own rounding in double is far below the filter's bounds)
+                error = std::max(error, std::fabs(x - (double(block.lo[k]) + double(byte) * double(block.step[k]))));
+            }
+    }
+    block.error = round_up(error * (1 + 0x1p-20));
+    return uint32_t(at / 4);
+}
+
 /// Places binary node `from`'s subtree as wide node `at` (already allocated).
-void place(const std::vector<Node>& nodes, uint32_t from, uint32_t at, std::vector<WideNode>& wide) {
+void place(Scene& scene, uint32_t from, uint32_t at) {
+    const std::vector<Node>& nodes = scene.nodes;
+    std::vector<WideNode>& wide = scene.wide;
     uint32_t members[WideNode::kWidth] = {nodes[from].index, nodes[from].index + 1};
     int n = 2;
     while (n < WideNode::kWidth) {  // open the inner member of largest area
@@ -45,7 +88,7 @@ void place(const std::vector<Node>& nodes, uint32_t from, uint32_t at, std::vect
             node.bounds[3 + k][c] = m.box.hi[k];
         }
         if (m.is_leaf()) {
-            node.child[c] = m.index;
+            node.child[c] = add_leaf(scene, m);
             node.count[c] = m.count;
         } else {
             node.child[c] = uint32_t(wide.size());
@@ -56,20 +99,32 @@ void place(const std::vector<Node>& nodes, uint32_t from, uint32_t at, std::vect
     wide[at] = node;
     for (int i = 0; i < n_inner; ++i) {  // (depth <= the binary tree's, < 96: see bvh_build.cpp)
         const int c = inner[i];
-        place(nodes, members[c], wide[at].child[c], wide);
+        place(scene, members[c], wide[at].child[c]);
     }
 }
 
 }  // namespace
 
-std::vector<WideNode> collapse_to_wide(const Scene& scene) {
-    std::vector<WideNode> wide;
-    if (scene.nodes.empty()) return wide;
+void build_wide(Scene& scene) {
+    std::vector<WideNode>& wide = scene.wide;
+    wide.clear();
+    scene.leaf_bytes.clear();
+    if (scene.nodes.empty()) return;
+    // The leaves' scale: the largest coordinate relative to the anchor in [0.5, 1)
+    // (triangle_filter.hpp's error bounds take the coordinates within [-1, 1]).
+    double reach = 0;
+    for (std::size_t i = 0; i < scene.points.size(); i += 3)
+        for (int k = 0; k < 3; ++k) reach = std::max(reach, std::fabs(scene.points[i + k] - scene.anchor[k]));
+    // (beyond 2^+-1000 the scale and the filter's bounds would leave double's range: the
+    // filter then lets every triangle through, leaf_scale 0)
+    const int e = reach > 0 ? std::ilogb(reach) + 1 : 0;
+    scene.leaf_scale = std::abs(e) <= 1000 ? std::ldexp(1.0, -e) : 0.0;
     wide.reserve(scene.nodes.size() / 2 + 1);
+    scene.leaf_bytes.reserve(scene.nodes.size() / 2 * LeafBlock::bytes(4) + 8);
     wide.emplace_back();
     const Node& root = scene.nodes[0];
     if (!root.is_leaf()) {
-        place(scene.nodes, 0, 0, wide);
+        place(scene, 0, 0);
     } else {  // a scene of one leaf: a root with that leaf in its first lane
         WideNode& node = wide[0];
         for (int c = 0; c < WideNode::kWidth; ++c) {
@@ -77,12 +132,13 @@ std::vector<WideNode> collapse_to_wide(const Scene& scene) {
                 node.bounds[k][c] = c == 0 ? root.box.lo[k] : std::numeric_limits<float>::infinity();
                 node.bounds[3 + k][c] = c == 0 ? root.box.hi[k] : -std::numeric_limits<float>::infinity();
             }
-            node.child[c] = c == 0 ? root.index : 0;
+            node.child[c] = c == 0 ? add_leaf(scene, root) : 0;
             node.count[c] = c == 0 ? root.count : 0;
         }
     }
     shrink_huge(wide);
-    return wide;
+    scene.leaf_bytes.resize(scene.leaf_bytes.size() + 8);  // (the last row's eight-byte reads)
+    shrink_huge(scene.leaf_bytes);
 }
 
 }  // namespace vrc

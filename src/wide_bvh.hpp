@@ -3,13 +3,16 @@
 // baseline build; traverse_wide.hpp).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
 namespace vrc {
 
 /// One node, 256 bytes (four cache lines). Lane c is a child: a node (`count[c] == 0`, at
-/// `child[c]`), a leaf of triangles `child[c] .. child[c] + count[c] - 1`, or nothing
+/// `child[c]`), a leaf of `count[c]` triangles (its LeafBlock at word `child[c]` of the
+/// scene's leaf_bytes),
+/// or nothing
 /// (an empty box: lo = +inf, hi = -inf, which no ray enters). Boxes are the binary BVH's,
 /// single precision relative to the scene's anchor, rounded outward.
 struct alignas(64) WideNode {
@@ -20,12 +23,38 @@ struct alignas(64) WideNode {
 };
 static_assert(sizeof(WideNode) == 256, "wide nodes are meant to be four cache lines");
 
+/// A leaf's triangles (at most eight) as the single-ray filter reads them
+/// (triangle_filter.hpp): lane c is triangle first + c, each corner's coordinates relative
+/// to the scene's anchor, scaled by leaf_scale (a power of two: they lie within [-1, 1]) and
+/// quantized to 8 bits in the leaf's box: lo + q * step, within `error` of the exact scaled
+/// coordinate. The quantized coordinates follow the header: nine rows (corner, axis) of
+/// `count` bytes. A leaf's tests read its 32 + 9 count contiguous bytes instead of
+/// gathering up to 24 points. (In floats a leaf took 288 bytes: a 20 k-triangle scene's
+/// blocks then outgrew the L2 cache. The coarser the grid, the more near-misses the
+/// filter leaves to the exact test: a 255th of a leaf's size is a small part of its
+/// triangles' own.)
+struct LeafBlock {
+    float lo[3], step[3];
+    float error;
+    uint32_t first;  ///< the leaf's first triangle (leaf order)
+    /// Row r (corner r / 3, axis r % 3) of a leaf of `count` triangles. Eight bytes may be
+    /// read from it: those past the row belong to the next one, or to the padding after
+    /// the last block.
+    [[nodiscard]] const uint8_t* row(int r, uint32_t count) const {
+        return reinterpret_cast<const uint8_t*>(this + 1) + std::size_t(r) * count;
+    }
+    /// Bytes of a leaf of `count` triangles, in whole words (the next header's alignment).
+    static constexpr std::size_t bytes(uint32_t count) { return sizeof(LeafBlock) + (9 * count + 3) / 4 * 4; }
+};
+static_assert(sizeof(LeafBlock) == 32, "a leaf's header is meant to be 32 bytes");
+
 struct Scene;
 
-/// Collapses the scene's binary BVH into eight-wide nodes (wide[0] the root), each node
-/// taking in the largest-area grandchildren until it holds eight children (the collapse of
-/// Wald, Benthin and Boulos, "Getting rid of packets", 2008). Leaves stay the binary
-/// BVH's. Empty when the scene has no BVH nodes.
-[[nodiscard]] std::vector<WideNode> collapse_to_wide(const Scene& scene);
+/// Collapses the scene's binary BVH into eight-wide nodes (scene.wide, wide[0] the root),
+/// each node taking in the largest-area grandchildren until it holds eight children (the
+/// collapse of Wald, Benthin and Boulos, "Getting rid of packets", 2008), and sets the
+/// leaves' blocks (scene.leaf_bytes, leaf_scale). Leaves stay the binary BVH's.
+/// Empty when the scene has no BVH nodes. Its points must be in their final order.
+void build_wide(Scene& scene);
 
 }  // namespace vrc
