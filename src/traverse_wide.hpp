@@ -152,8 +152,9 @@ struct NoSink {
 /// traversal's, whatever the order. The watertight kernel meets only the triangles
 /// TriangleFilter leaves (its verdicts are that kernel's); the other strategies meet every
 /// triangle, so their own errors stay theirs. The ray must outlive the search. Staged
-/// (kStaged), a leaf takes three steps, as interleaved searches want: its point indices
-/// asked for, then its points, then its test.
+/// (kStaged), a leaf takes three steps after its block is asked for, as interleaved
+/// searches want: the filter, asking for the candidates' point indices; asking for their
+/// points; their test.
 template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Lanes, bool kStaged = false,
           class Sink = NoSink>
 class WideSearch {
@@ -216,57 +217,20 @@ class WideSearch {
         unsigned mask = lanes_.test(node, enter);
         if (!mask) return pop();
         // The entered lanes go on the stack farthest first, so the nearest is popped first,
-        // and the nearest is gone on to at once (its slot, just above the stack's top, is
-        // written but not kept). Every hit wanted, any order does; any hit, too (a search
-        // stops at the first found, wherever it lies), but the order costs little here.
-#if defined(__AVX2__) && !defined(VRC_OLD_STEP)
-        // Without a branch per lane (whether and where a lane goes follows no pattern the
-        // predictor learns): the lanes sorted by a sorting network on keys that carry their
-        // lane number, the nearest found apart by a shorter reduction (the next node's load
-        // waits for it, not for the sort).
-        const __m256 entry = _mm256_load_ps(enter);
-        const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-        // (non-negative floats order as their bits; the low three bits of the key give way
-        // to the lane, which orders only: the stack keeps the exact entries)
-        const __m256i bits = _mm256_castps_si256(_mm256_max_ps(entry, _mm256_setzero_ps()));
-        const __m256i key = _mm256_blendv_epi8(_mm256_set1_epi32(-1), _mm256_or_si256(_mm256_andnot_si256(_mm256_set1_epi32(7), bits), lane),
-                                               _mm256_castps_si256(lane_mask(mask)));
-        const int nearest = nearest_lane(key);
-        const __m256i order = _mm256_and_si256(sort_descending(key), _mm256_set1_epi32(7));
-        const std::size_t base = top_;
-        _mm256_storeu_si256(reinterpret_cast<__m256i*>(stack_child_ + base),
-                            _mm256_permutevar8x32_epi32(_mm256_load_si256(reinterpret_cast<const __m256i*>(node.child)), order));
-        _mm256_storeu_si256(reinterpret_cast<__m256i*>(stack_count_ + base),
-                            _mm256_permutevar8x32_epi32(_mm256_load_si256(reinterpret_cast<const __m256i*>(node.count)), order));
-        _mm256_storeu_ps(stack_enter_ + base, _mm256_permutevar8x32_ps(entry, order));
-        top_ += std::size_t(__builtin_popcount(mask) - 1);
-#else
-        const std::size_t base = top_;
-        const int last = __builtin_popcount(mask) - 1;
-        top_ += std::size_t(last);
-        int nearest = 0;
-        for (unsigned rest = mask; rest; rest &= rest - 1) {
-            const int c = __builtin_ctz(rest);
-            const unsigned before = mask & ((1u << c) - 1);
-#if defined(__AVX2__)
-            const __m256 keys = _mm256_blendv_ps(_mm256_set1_ps(-HUGE_VALF), _mm256_load_ps(enter), lane_mask(mask));
-            const __m256 key = _mm256_set1_ps(enter[c]);
-            const unsigned farther = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_GT_OQ))) |
-                      (unsigned(_mm256_movemask_ps(_mm256_cmp_ps(keys, key, _CMP_EQ_OQ))) & before);
-#else
-            unsigned farther = 0;
-            for (unsigned m = mask; m; m &= m - 1) {
-                const int d = __builtin_ctz(m);
-                farther |= unsigned(enter[d] > enter[c] || (enter[d] == enter[c] && d < c)) << d;
-            }
-#endif
-            const int place = __builtin_popcount(farther);
-            const std::size_t at = base + std::size_t(place);
-            prefetch_child(node, c);
-            stack_child_[at] = node.child[c], stack_count_[at] = node.count[c], stack_enter_[at] = enter[c];
-            nearest = place == last ? c : nearest;
+        // and the nearest is gone on to at once. Every hit wanted, any order does; any hit,
+        // too (a search stops at the first found, wherever it lies), but the order costs
+        // little here.
+        int nearest;
+        if (__builtin_popcount(mask) <= 2) {  // (most nodes: one lane or two entered)
+            const int c0 = __builtin_ctz(mask), c1 = 31 - __builtin_clz(mask);
+            const bool second = enter[c1] < enter[c0];
+            nearest = second ? c1 : c0;
+            const int other = second ? c0 : c1;  // (one lane: a slot written, not kept)
+            stack_child_[top_] = node.child[other], stack_count_[top_] = node.count[other], stack_enter_[top_] = enter[other];
+            top_ += std::size_t(c0 != c1);
+        } else {
+            nearest = push_sorted(node, enter, mask);
         }
-#endif
         const After after = take({node.child[nearest], node.count[nearest], enter[nearest]});
         return after == After::pop ? pop() : after == After::step;
     }
@@ -276,6 +240,48 @@ class WideSearch {
     [[nodiscard]] unsigned nodes() const { return nodes_; }
 
    private:
+    /// Pushes the lanes of `mask` (entered at `enter`) but the nearest, farthest first, and
+    /// returns the nearest.
+    int push_sorted(const WideNode& node, const float enter[WideNode::kWidth], unsigned mask) {
+        const std::size_t base = top_;
+        top_ += std::size_t(__builtin_popcount(mask) - 1);
+#if defined(__AVX2__)
+        // Without a branch per lane (whether and where a lane goes follows no pattern the
+        // predictor learns): the lanes sorted by a sorting network on keys that carry their
+        // lane number, the nearest found apart by a shorter reduction (the next node's load
+        // waits for it, not for the sort). Non-negative floats order as their bits; the low
+        // three bits of a key give way to the lane, which orders only: the stack keeps the
+        // exact entries.
+        const __m256 entry = _mm256_load_ps(enter);
+        const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        const __m256i bits = _mm256_castps_si256(_mm256_max_ps(entry, _mm256_setzero_ps()));
+        const __m256i key = _mm256_blendv_epi8(_mm256_set1_epi32(-1), _mm256_or_si256(_mm256_andnot_si256(_mm256_set1_epi32(7), bits), lane),
+                                               _mm256_castps_si256(lane_mask(mask)));
+        const __m256i order = _mm256_and_si256(sort_descending(key), _mm256_set1_epi32(7));
+        const auto load = [](const uint32_t* p) { return _mm256_load_si256(reinterpret_cast<const __m256i*>(p)); };
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(stack_child_ + base), _mm256_permutevar8x32_epi32(load(node.child), order));
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(stack_count_ + base), _mm256_permutevar8x32_epi32(load(node.count), order));
+        _mm256_storeu_ps(stack_enter_ + base, _mm256_permutevar8x32_ps(entry, order));
+        return nearest_lane(key);
+#else
+        // Each lane's place counted: the lanes farther than it, and those as far before it.
+        int nearest = 0;
+        const std::size_t last = top_;
+        for (unsigned rest = mask; rest; rest &= rest - 1) {
+            const int c = __builtin_ctz(rest);
+            unsigned farther = 0;
+            for (unsigned m = mask; m; m &= m - 1) {
+                const int d = __builtin_ctz(m);
+                farther |= unsigned(enter[d] > enter[c] || (enter[d] == enter[c] && d < c)) << d;
+            }
+            const std::size_t at = base + std::size_t(__builtin_popcount(farther));
+            stack_child_[at] = node.child[c], stack_count_[at] = node.count[c], stack_enter_[at] = enter[c];
+            nearest = at == last ? c : nearest;
+        }
+        return nearest;
+#endif
+    }
+
 #if defined(__AVX2__)
     /// The lanes whose bits are set in `bits`, as all-ones lanes.
     static __m256 lane_mask(unsigned bits) {
@@ -308,16 +314,6 @@ class WideSearch {
         return exchange<0x55>(v, pairs(v));
     }
 #endif
-
-    /// Asks memory for what lane c of `node` leads to: a node or a leaf's block (chosen
-    /// without a branch: whether a lane is a leaf follows no pattern the predictor learns).
-    [[gnu::always_inline]] void prefetch_child(const WideNode& node, int c) const {
-        const uint32_t child = node.child[c];
-        // (addresses as integers: the one not chosen may lie outside its array)
-        const uintptr_t as_node = reinterpret_cast<uintptr_t>(scene_.wide.data()) + sizeof(WideNode) * child;
-        const uintptr_t as_leaf = reinterpret_cast<uintptr_t>(scene_.leaf_bytes.data()) + 4 * std::size_t(child);
-        prefetch_block(reinterpret_cast<const char*>(node.count[c] == 0 ? as_node : as_leaf));
-    }
 
     /// Asks memory for a wide node or a leaf's block at `p` (four lines hold either).
     [[gnu::always_inline]] static void prefetch_block(const char* p) {

@@ -38,24 +38,22 @@ namespace vrc {
 /// kernel, would not allow it).
 class TriangleFilter {
    public:
-    TriangleFilter(const Scene& scene, const Ray& ray, const Shear& shear) {
-        const double scale = scene.leaf_scale;
-        const int axis[3] = {shear.kx, shear.ky, shear.kz};
+    TriangleFilter(const Scene& scene, const Ray& ray, const Shear& shear)
+        : axis_{shear.kx, shear.ky, shear.kz},
+          sx_(static_cast<float>(shear.sx)),
+          sy_(static_cast<float>(shear.sy)),
+          sz_(static_cast<float>(shear.sz)),
+          scale_(scene.leaf_scale),
+          tmin_(static_cast<float>(ray.tmin * scale_)) {
         float reach = 0;
         for (int k = 0; k < 3; ++k) {
-            axis_[k] = axis[k];
-            org_[k] = static_cast<float>((ray.org[axis[k]] - scene.anchor[axis[k]]) * scale);
+            org_[k] = static_cast<float>((ray.org[axis_[k]] - scene.anchor[axis_[k]]) * scale_);
             reach = std::max(reach, std::fabs(org_[k]));
         }
         // Beyond these the bounds could overflow (or the scale is off): every lane goes on
         // to the kernel. (|sx|, |sy| <= 1 by the choice of kz.)
-        usable_ = scale > 0 && reach < 0x1p40f && std::fabs(shear.sz) <= 1;
+        usable_ = scale_ > 0 && reach < 0x1p40f && std::fabs(shear.sz) <= 1;
         delta_ = 0x1p-20f * (1 + reach) * (1 + 0x1p-20f);
-        sx_ = lanes_set(static_cast<float>(shear.sx));
-        sy_ = lanes_set(static_cast<float>(shear.sy));
-        sz_ = lanes_set(static_cast<float>(shear.sz));
-        scale_ = scale;
-        tmin_ = lanes_set(round_down(ray.tmin * scale));
     }
 
     /// Bits of the lanes among the first `n` of `block` that may meet the ray with
@@ -71,10 +69,10 @@ class TriangleFilter {
             const Lane8 px = lanes_fmadd(lanes_load_u8(block.row(3 * v + axis_[0], n)), step[0], corner[0]);
             const Lane8 py = lanes_fmadd(lanes_load_u8(block.row(3 * v + axis_[1], n)), step[1], corner[1]);
             const Lane8 pz = lanes_fmadd(lanes_load_u8(block.row(3 * v + axis_[2], n)), step[2], corner[2]);
-            x[v] = lanes_fnmadd(sx_, pz, px);
-            y[v] = lanes_fnmadd(sy_, pz, py);
+            x[v] = lanes_fnmadd(lanes_set(sx_), pz, px);
+            y[v] = lanes_fnmadd(lanes_set(sy_), pz, py);
             s[v] = lanes_add(lanes_abs(x[v]), lanes_abs(y[v]));
-            z[v] = lanes_mul(sz_, pz);
+            z[v] = lanes_mul(lanes_set(sz_), pz);
         }
         const float d = delta_ + 4 * block.error;
         const Lane8 delta = lanes_set(d), delta2 = lanes_set(4 * d * d), rounding = lanes_set(0x1p-22f);
@@ -92,19 +90,23 @@ class TriangleFilter {
         // coordinates: it lies between the least and the greatest.
         const Lane8 near = lanes_min(lanes_min(z[0], z[1]), z[2]), far = lanes_max(lanes_max(z[0], z[1]), z[2]);
         const Lane8 relative = lanes_set(0x1p-8f), slack = lanes_set(delta_ + 2 * block.error);
-        const Lane8 before = lanes_lt(lanes_add(far, lanes_fmadd(relative, lanes_abs(far), slack)), tmin_);
-        const Lane8 after = lanes_lt(lanes_set(round_up(bound * scale_)), lanes_sub(near, lanes_fmadd(relative, lanes_abs(near), slack)));
+        // (tmin and the bound rounded to nearest: their relative error, 2^-24, vanishes in
+        // the relative margin, which exceeds the kernel's 2^-9 by far more)
+        const Lane8 before = lanes_lt(lanes_add(far, lanes_fmadd(relative, lanes_abs(far), slack)), lanes_set(tmin_));
+        const Lane8 after = lanes_lt(lanes_set(static_cast<float>(bound * scale_)),
+                                     lanes_sub(near, lanes_fmadd(relative, lanes_abs(near), slack)));
         const Lane8 rejected = lanes_or(lanes_and(negative, positive), lanes_or(before, after));
         return ~lanes_bits(rejected) & all;
     }
 
    private:
-    int axis_[3];      ///< the shear's kx, ky, kz
-    float org_[3];     ///< the ray's origin along them, relative to the anchor, scaled
-    float delta_;      ///< 16u P
-    Lane8 sx_, sy_, sz_, tmin_;
-    double scale_ = 1;
-    bool usable_ = true;
+    int axis_[3];   ///< the shear's kx, ky, kz
+    float sx_, sy_, sz_;
+    double scale_;
+    float tmin_;    ///< scaled
+    float org_[3];  ///< the ray's origin along kx, ky, kz, relative to the anchor, scaled
+    float delta_;   ///< 16u P
+    bool usable_;
 };
 
 }  // namespace vrc
