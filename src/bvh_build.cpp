@@ -859,7 +859,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     });
     order_points(scene, points, n_points);
     build_camera_tree(scene);
-    build_wide(scene);
+    build_wide(scene, pthreads);
     scene.binary_nodes = scene.nodes.size();
     std::vector<Node>().swap(scene.nodes);
     return scene;
@@ -1041,7 +1041,7 @@ Scene build_scene(const double* points, std::size_t n_points, const uint32_t* tr
     }
     order_points(scene, points, n_points);
     build_camera_tree(scene);
-    build_wide(scene);
+    build_wide(scene, std::max(1u, threads));
     scene.binary_nodes = scene.nodes.size();
     std::vector<Node>().swap(scene.nodes);
     return scene;

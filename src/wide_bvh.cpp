@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <thread>
 
 #include "bvh.hpp"
 #include "geometry.hpp"
@@ -12,21 +13,30 @@
 namespace vrc {
 namespace {
 
-/// Appends the block of leaf `node` (triangles in leaf order) and returns its word offset.
-uint32_t add_leaf(Scene& scene, const Node& node) {
-    const uint32_t n = node.count;
-    if (n > WideNode::kWidth) throw std::logic_error("a BVH leaf holds more than eight triangles");
-    std::vector<std::byte>& bytes = scene.leaf_bytes;
-    const std::size_t at = bytes.size();
-    if (at / 4 > UINT32_MAX) throw std::length_error("too many triangles for the single-ray leaves");
-    bytes.resize(at + LeafBlock::bytes(n));
-    LeafBlock& block = *new (bytes.data() + at) LeafBlock{};
+/// A leaf whose block is placed but not yet filled: its word offset and triangles.
+struct PendingLeaf {
+    uint32_t at, first, count;
+};
+
+/// Places a block for leaf `node` after the others (filled later, fill_leaf) and returns
+/// its word offset.
+uint32_t add_leaf(const Node& node, std::vector<PendingLeaf>& pending, std::size_t& end) {
+    const std::size_t at = end;
+    end += LeafBlock::bytes(node.count);
+    pending.push_back({uint32_t(at / 4), node.index, node.count});
+    return uint32_t(at / 4);
+}
+
+/// Fills a placed leaf's block.
+void fill_leaf(Scene& scene, const PendingLeaf& leaf) {
+    const uint32_t n = leaf.count;
+    LeafBlock& block = *new (scene.leaf_bytes.data() + 4 * std::size_t(leaf.at)) LeafBlock{};
     uint8_t* q = reinterpret_cast<uint8_t*>(&block + 1);
-    block.first = node.index;
+    block.first = leaf.first;
     double scaled[3][3][WideNode::kWidth];  // (exact up to a rounding of 2^-53)
     for (uint32_t c = 0; c < n; ++c)
         for (int v = 0; v < 3; ++v) {
-            const double* p = scene.point(scene.triangles[3 * std::size_t(node.index + c) + v]);
+            const double* p = scene.point(scene.triangles[3 * std::size_t(leaf.first + c) + v]);
             for (int k = 0; k < 3; ++k) scaled[v][k][c] = (p[k] - scene.anchor[k]) * scene.leaf_scale;
         }
     double error = 0;
@@ -35,23 +45,25 @@ uint32_t add_leaf(Scene& scene, const Node& node) {
         for (int v = 0; v < 3; ++v)
             for (uint32_t c = 0; c < n; ++c) lo = std::min(lo, scaled[v][k][c]), hi = std::max(hi, scaled[v][k][c]);
         block.lo[k] = round_down(lo);
-        block.step[k] = round_up((hi - double(block.lo[k])) / 255);
+        block.step[k] = round_up((hi - double(block.lo[k])) * (1.0 / 255));
+        // (any level will do: the error is measured, not assumed; a product, not a
+        // division per coordinate, which showed in the scene's build time)
+        const double to_level = block.step[k] > 0 ? 1 / double(block.step[k]) : 0;
         for (int v = 0; v < 3; ++v)
             for (uint32_t c = 0; c < n; ++c) {
                 const double x = scaled[v][k][c];
-                const double level = block.step[k] > 0 ? std::nearbyint((x - block.lo[k]) / block.step[k]) : 0;
-                const uint8_t byte = uint8_t(std::clamp(level, 0.0, 255.0));
+                const double level = std::min(std::max((x - block.lo[k]) * to_level + 0.5, 0.0), 255.0);
+                const uint8_t byte = uint8_t(level);
                 q[(3 * v + k) * n + c] = byte;
                 // (this difference's own rounding in double is far below the filter's bounds)
                 error = std::max(error, std::fabs(x - (double(block.lo[k]) + double(byte) * double(block.step[k]))));
             }
     }
     block.error = round_up(error * (1 + 0x1p-20));
-    return uint32_t(at / 4);
 }
 
 /// Places binary node `from`'s subtree as wide node `at` (already allocated).
-void place(Scene& scene, uint32_t from, uint32_t at) {
+void place(Scene& scene, uint32_t from, uint32_t at, std::vector<PendingLeaf>& pending, std::size_t& end) {
     const std::vector<Node>& nodes = scene.nodes;
     std::vector<WideNode>& wide = scene.wide;
     uint32_t members[WideNode::kWidth] = {nodes[from].index, nodes[from].index + 1};
@@ -88,7 +100,7 @@ void place(Scene& scene, uint32_t from, uint32_t at) {
             node.bounds[3 + k][c] = m.box.hi[k];
         }
         if (m.is_leaf()) {
-            node.child[c] = add_leaf(scene, m);
+            node.child[c] = add_leaf(m, pending, end);
             node.count[c] = m.count;
         } else {
             node.child[c] = uint32_t(wide.size());
@@ -99,13 +111,13 @@ void place(Scene& scene, uint32_t from, uint32_t at) {
     wide[at] = node;
     for (int i = 0; i < n_inner; ++i) {  // (depth <= the binary tree's, < 96: see bvh_build.cpp)
         const int c = inner[i];
-        place(scene, members[c], wide[at].child[c]);
+        place(scene, members[c], wide[at].child[c], pending, end);
     }
 }
 
 }  // namespace
 
-void build_wide(Scene& scene) {
+void build_wide(Scene& scene, unsigned threads) {
     std::vector<WideNode>& wide = scene.wide;
     wide.clear();
     scene.leaf_bytes.clear();
@@ -120,11 +132,23 @@ void build_wide(Scene& scene) {
     const int e = reach > 0 ? std::ilogb(reach) + 1 : 0;
     scene.leaf_scale = std::abs(e) <= 1000 ? std::ldexp(1.0, -e) : 0.0;
     wide.reserve(scene.nodes.size() / 2 + 1);
-    scene.leaf_bytes.reserve(scene.nodes.size() / 2 * LeafBlock::bytes(4) + 8);
     wide.emplace_back();
+    // The leaves' blocks laid out first (their bytes counted, so the array is made once),
+    // then filled.
+    std::size_t bytes = 8;  // (the last row's eight-byte reads)
+    for (const Node& node : scene.nodes) {
+        if (node.count > WideNode::kWidth) throw std::logic_error("a BVH leaf holds more than eight triangles");
+        if (node.is_leaf()) bytes += LeafBlock::bytes(node.count);
+    }
+    if (bytes / 4 > UINT32_MAX) throw std::length_error("too many triangles for the single-ray leaves");
+    reserve_huge(scene.leaf_bytes, bytes);
+    scene.leaf_bytes.resize(bytes);
+    std::vector<PendingLeaf> pending;
+    pending.reserve(scene.nodes.size() / 2 + 1);
+    std::size_t end = 0;
     const Node& root = scene.nodes[0];
     if (!root.is_leaf()) {
-        place(scene, 0, 0);
+        place(scene, 0, 0, pending, end);
     } else {  // a scene of one leaf: a root with that leaf in its first lane
         WideNode& node = wide[0];
         for (int c = 0; c < WideNode::kWidth; ++c) {
@@ -132,13 +156,22 @@ void build_wide(Scene& scene) {
                 node.bounds[k][c] = c == 0 ? root.box.lo[k] : std::numeric_limits<float>::infinity();
                 node.bounds[3 + k][c] = c == 0 ? root.box.hi[k] : -std::numeric_limits<float>::infinity();
             }
-            node.child[c] = c == 0 ? add_leaf(scene, root) : 0;
+            node.child[c] = c == 0 ? add_leaf(root, pending, end) : 0;
             node.count[c] = c == 0 ? root.count : 0;
         }
     }
     shrink_huge(wide);
-    scene.leaf_bytes.resize(scene.leaf_bytes.size() + 8);  // (the last row's eight-byte reads)
-    shrink_huge(scene.leaf_bytes);
+    // The blocks filled on all threads: their points, read through the triangles, made
+    // filling them a third of the frog's build on one.
+    const unsigned workers = std::max(1u, std::min<unsigned>(threads, unsigned(pending.size() / 4096)));
+    const auto fill = [&](unsigned w) {
+        for (std::size_t i = pending.size() * w / workers, e = pending.size() * (w + 1) / workers; i < e; ++i)
+            fill_leaf(scene, pending[i]);
+    };
+    std::vector<std::thread> helpers;
+    for (unsigned w = 1; w < workers; ++w) helpers.emplace_back(fill, w);
+    fill(0);
+    for (std::thread& t : helpers) t.join();
 }
 
 }  // namespace vrc

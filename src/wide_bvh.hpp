@@ -54,7 +54,8 @@ struct Scene;
 /// each node taking in the largest-area grandchildren until it holds eight children (the
 /// collapse of Wald, Benthin and Boulos, "Getting rid of packets", 2008), and sets the
 /// leaves' blocks (scene.leaf_bytes, leaf_scale). Leaves stay the binary BVH's.
-/// Empty when the scene has no BVH nodes. Its points must be in their final order.
-void build_wide(Scene& scene);
+/// Empty when the scene has no BVH nodes. Its points must be in their final order. The
+/// leaves' blocks are filled on up to `threads` threads.
+void build_wide(Scene& scene, unsigned threads);
 
 }  // namespace vrc
