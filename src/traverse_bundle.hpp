@@ -429,10 +429,10 @@ class BundleTracer {
                 if (node.count[c] == 0) {
                     const char* next = reinterpret_cast<const char*>(&scene_.wide[node.child[c]]);
                     for (int line = 0; line < 4; ++line) prefetch_line(next + 64 * line);
-                } else {  // a leaf's point indices (its points follow when it is popped)
-                    const uint32_t first = scene_.leaf(node.child[c]).first;
-                    prefetch_line(scene_.triangles.data() + 3 * std::size_t(first));
-                    prefetch_line(scene_.triangles.data() + 3 * std::size_t(first + node.count[c]) - 1);
+                } else {  // a leaf's block (its point indices and points follow when it is popped)
+                    const char* block = reinterpret_cast<const char*>(&scene_.leaf(node.child[c]));
+                    prefetch_line(block);
+                    prefetch_line(block + LeafBlock::bytes(node.count[c]) - 1);
                 }
                 stack[top++] = {node.child[c], node.count[c], extent[0][c], nearest[c], rects[c]};
             }

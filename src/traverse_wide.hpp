@@ -186,7 +186,7 @@ class WideSearch {
 
     /// Tests the next node, pushing the children the ray enters, then pops (pop()); staged,
     /// a step may instead be one of a leaf's. False when the search is over.
-    bool step() {
+    [[gnu::always_inline]] bool step() {
         if constexpr (kStaged) {
             if (leaf_stage_ == 1) {  // the leaf's block is in cache: filter, ask for the candidates' point indices
                 leaf_candidates_ = candidates(leaf_.child, leaf_.count);
