@@ -76,28 +76,12 @@ struct Lane8 {
 }
 #endif
 
-/// c - a * b, in one rounding where the CPU has FMA.
-[[gnu::always_inline]] inline Lane8 lanes_fnmadd(Lane8 a, Lane8 b, Lane8 c) {
-#if defined(__FMA__)
-    return _mm256_fnmadd_ps(a, b, c);
-#else
-    return lanes_sub(c, lanes_mul(a, b));
-#endif
-}
 /// a * b + c, in one rounding where the CPU has FMA.
 [[gnu::always_inline]] inline Lane8 lanes_fmadd(Lane8 a, Lane8 b, Lane8 c) {
 #if defined(__FMA__)
     return _mm256_fmadd_ps(a, b, c);
 #else
     return lanes_add(lanes_mul(a, b), c);
-#endif
-}
-/// a * b - c, in one rounding where the CPU has FMA.
-[[gnu::always_inline]] inline Lane8 lanes_fmsub(Lane8 a, Lane8 b, Lane8 c) {
-#if defined(__FMA__)
-    return _mm256_fmsub_ps(a, b, c);
-#else
-    return lanes_sub(lanes_mul(a, b), c);
 #endif
 }
 

@@ -69,8 +69,8 @@ class TriangleFilter {
             const Lane8 px = lanes_fmadd(lanes_load_u8(block.row(3 * v + axis_[0], n)), step[0], corner[0]);
             const Lane8 py = lanes_fmadd(lanes_load_u8(block.row(3 * v + axis_[1], n)), step[1], corner[1]);
             const Lane8 pz = lanes_fmadd(lanes_load_u8(block.row(3 * v + axis_[2], n)), step[2], corner[2]);
-            x[v] = lanes_fnmadd(lanes_set(sx_), pz, px);
-            y[v] = lanes_fnmadd(lanes_set(sy_), pz, py);
+            x[v] = lanes_fmadd(lanes_set(-sx_), pz, px);
+            y[v] = lanes_fmadd(lanes_set(-sy_), pz, py);
             s[v] = lanes_add(lanes_abs(x[v]), lanes_abs(y[v]));
             z[v] = lanes_mul(lanes_set(sz_), pz);
         }
@@ -81,7 +81,7 @@ class TriangleFilter {
         Lane8 negative = lanes_set(0.0f), positive = negative;
         for (const auto& pair : pairs) {
             const int i = pair[0], j = pair[1];
-            const Lane8 edge = lanes_fmsub(x[i], y[j], lanes_mul(y[i], x[j]));
+            const Lane8 edge = lanes_fmadd(x[i], y[j], lanes_neg(lanes_mul(y[i], x[j])));
             const Lane8 margin = lanes_fmadd(lanes_mul(rounding, s[i]), s[j], lanes_fmadd(delta, lanes_add(s[i], s[j]), delta2));
             negative = lanes_or(negative, lanes_lt(edge, lanes_neg(margin)));
             positive = lanes_or(positive, lanes_lt(margin, edge));
