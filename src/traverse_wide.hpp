@@ -442,11 +442,11 @@ Hit<Real> trace_ray(const Scene& scene, const Ray& ray, const CastContext& conte
     return search.hit();
 }
 
-/// Scenes whose single-ray data (wide nodes, triangles, points) take this much memory or
-/// more are traced several rays at a time (trace_rays_interleaved): beyond the caches
-/// their rays wait for memory at every node. One thread, alternated with the ray-at-a-time
-/// path on random rays: 0.6x the time on 330 k triangles (22 MB) and the frog, 0.9x on
-/// 80 k (5 MB), 1.2x on 20 k (0.7 MB).
+/// Scenes whose single-ray data (wide nodes, leaf blocks, triangles, points) take this
+/// much memory or more are traced several rays at a time (trace_rays_interleaved): beyond
+/// the caches their rays wait for memory at every node. One thread, alternated with the
+/// ray-at-a-time path on random rays: 0.6x the time on 330 k triangles (22 MB) and the
+/// frog, 0.9x on 80 k (5 MB), 1.2x on 20 k (0.7 MB).
 constexpr std::size_t kInterleavedBytes = std::size_t(2) << 20;
 
 /// Whether rays `which` of `rays` follow one another closely (a lidar's sweep, an image's
@@ -477,9 +477,9 @@ bool coherent(const Scene& scene, const Rays& rays, const std::vector<std::size_
 
 /// Closest (or any) hits of rays `which` of `rays`, handed to `store(k, ray, hit)`: up to
 /// kInFlight searches take turns a step at a time, each step ending where the search asks
-/// for memory (a node, a leaf's point indices, its points), so that while one waits the
-/// others compute: single rays through a scene larger than the caches spend most of their
-/// time waiting. The answers are trace_ray's; rays finish in any order. With HitPolicy::all
+/// for memory (a node, a leaf's block, its candidates' point indices, their points), so
+/// that while one waits the others compute: single rays through a scene larger than the
+/// caches spend most of their time waiting. The answers are trace_ray's; rays finish in any order. With HitPolicy::all
 /// each search in flight has a sink of its own among `sinks` (kInFlight of them), readied
 /// for ray k by `sink.start(k, ray)`; `store` then receives it too: `store(k, ray, hit,
 /// sink)` (nullptr without sinks). `nodes` as trace_ray's. Sixteen in flight: enough to
