@@ -479,11 +479,12 @@ bool coherent(const Scene& scene, const Rays& rays, const std::vector<std::size_
 /// kInFlight searches take turns a step at a time, each step ending where the search asks
 /// for memory (a node, a leaf's block, its candidates' point indices, their points), so
 /// that while one waits the others compute: single rays through a scene larger than the
-/// caches spend most of their time waiting. The answers are trace_ray's; rays finish in any order. With HitPolicy::all
-/// each search in flight has a sink of its own among `sinks` (kInFlight of them), readied
-/// for ray k by `sink.start(k, ray)`; `store` then receives it too: `store(k, ray, hit,
-/// sink)` (nullptr without sinks). `nodes` as trace_ray's. Sixteen in flight: enough to
-/// keep the memory busy for random rays through the frog (fewer were slower, more no faster).
+/// caches spend most of their time waiting. The answers are trace_ray's; rays finish in any
+/// order. With HitPolicy::all each search in flight has a sink of its own among `sinks`
+/// (kInFlight of them), readied for ray k by `sink.start(k, ray)`; `store` then receives it
+/// too: `store(k, ray, hit, sink)` (nullptr without sinks). `nodes` as trace_ray's. Sixteen
+/// in flight: enough to keep the memory busy for random rays through the frog (fewer were
+/// slower, more no faster).
 constexpr int kInFlight = 16;
 template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Rays, class Store, class Sink = NoSink>
 void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vector<std::size_t>& which,
