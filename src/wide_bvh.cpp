@@ -46,8 +46,7 @@ void fill_leaf(Scene& scene, const PendingLeaf& leaf) {
             for (uint32_t c = 0; c < n; ++c) lo = std::min(lo, scaled[v][k][c]), hi = std::max(hi, scaled[v][k][c]);
         block.lo[k] = round_down(lo);
         block.step[k] = round_up((hi - double(block.lo[k])) * (1.0 / 255));
-        // (any level will do: the error is measured, not assumed; a product, not a
-        // division per coordinate, which showed in the scene's build time)
+        // (any level will do: the error is measured, not assumed)
         const double to_level = block.step[k] > 0 ? 1 / double(block.step[k]) : 0;
         for (int v = 0; v < 3; ++v)
             for (uint32_t c = 0; c < n; ++c) {
