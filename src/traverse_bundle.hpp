@@ -162,8 +162,8 @@ class BundleTracer {
         double nodes_per_ray = -1;      // of the row's last tile traced ray by ray (-1: none yet)
         CostChooser bundles{true, 64};  // the row's tiles as bundles (tried first), or ray by ray
         // rays one after another, or several in flight (a large scene's); the other way
-        // tried every 64th tile (every 16th cost the terrain's scan a few percent: there
-        // one after another takes 1.7x the time)
+        // tried only every 64th tile: on the terrain one after another takes 1.7x the
+        // time, which each trial pays
         CostChooser by_ray{false, 64};
         [[nodiscard]] double visit_budget() const {
             return nodes_per_ray < 0 ? kVisitsPerRay : std::clamp(nodes_per_ray / kNodesPerVisit, 0.25, double(kVisitsPerRay));

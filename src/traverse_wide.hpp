@@ -319,8 +319,8 @@ class WideSearch {
     /// Asks memory for what lane c of `node` leads to, a node or a leaf's block, chosen
     /// without a branch (whether a lane is a leaf follows no pattern the predictor learns).
     /// Only the second of two entered lanes is asked for when pushed: a scene beyond the
-    /// caches (the terrain's lidar rows traced one after another) waits less for it, and
-    /// asking for every pushed lane cost cached scenes more than it saved them.
+    /// caches (the terrain's lidar rows traced one after another) then waits less for it,
+    /// while the sorted pushes of three or more stay cheap for scenes in the caches.
     [[gnu::always_inline]] void prefetch_child(const WideNode& node, int c) const {
         const uint32_t child = node.child[c];
         // (addresses as integers: the one not chosen may lie outside its array)

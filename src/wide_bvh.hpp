@@ -28,11 +28,11 @@ static_assert(sizeof(WideNode) == 256, "wide nodes are meant to be four cache li
 /// to the scene's anchor, scaled by leaf_scale (a power of two: they lie within [-1, 1]) and
 /// quantized to 8 bits in the leaf's box: lo + q * step, within `error` of the exact scaled
 /// coordinate. The quantized coordinates follow the header: nine rows (corner, axis) of
-/// `count` bytes. A leaf's tests read its 32 + 9 count contiguous bytes instead of
-/// gathering up to 24 points. (In floats a leaf took 288 bytes: a 20 k-triangle scene's
-/// blocks then outgrew the L2 cache. The coarser the grid, the more near-misses the
-/// filter leaves to the exact test: a 255th of a leaf's size is a small part of its
-/// triangles' own.)
+/// `count` bytes. A leaf's tests read its 32 + 9 count contiguous bytes rather than
+/// gather up to 24 points through the triangles. Eight bits, not floats: a 20 k-triangle
+/// scene's blocks then stay in the L2 cache, and the scene within the memory budget. The
+/// price is the grid's error (a 255th of the leaf's size in the filter's bound): near-misses
+/// close to a ray's origin, as around a ray leaving the surface, go on to the exact test.
 struct LeafBlock {
     float lo[3], step[3];
     float error;
