@@ -8,6 +8,7 @@
 #include <cstdint>
 
 #include "geometry.hpp"
+#include "memory.hpp"
 
 namespace vrc {
 
@@ -271,6 +272,13 @@ class ArrayRays {
         ray.tmax = tmax_;
         ray.normalize_direction();
         return ray;
+    }
+
+    /// Asks the cache for ray k's origin and direction (searches in flight take rays in
+    /// order, but among their scattered reads the hardware's prefetcher did not keep up).
+    void prefetch(std::size_t k) const {
+        prefetch_line(o_ + o_stride_ * k);
+        prefetch_line(d_ + 3 * k);
     }
 
     static constexpr std::size_t kChunk = 1024;

@@ -143,7 +143,7 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         if (may_hit && interleave) rays.for_each_in_tile(tile, [&](std::size_t k) { tile_rays.push_back(k); });
         unsigned nodes = 0;  // (the chooser's unit of work: rays' costs vary far more)
         const auto interleaved = [&] {
-            const auto take = [&](std::size_t k, const Ray& ray, const Hit<Real>& hit, NoSink*) { store(k, ray, hit); };
+            const DeferredStore<OutputWriter<Real>> take{store};
             NoSink* no_sinks = nullptr;
             if (context.any_hit)
                 trace_rays_interleaved<Kernel, Real, HitPolicy::any>(scene, rays, tile_rays, context, take, no_sinks, &nodes);

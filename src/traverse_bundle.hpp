@@ -401,7 +401,7 @@ class BundleTracer {
             if (e.near > far_limit_) continue;
             if (++visits > budget) return false;
             if (e.count) {
-                leaf(e.child, e.count, e.rect, e.nearest);
+                leaf(e.child, leaf_size(e.count), e.rect, e.nearest);
                 continue;
             }
             const WideNode& node = scene_.wide[e.child];
@@ -435,7 +435,7 @@ class BundleTracer {
                 } else {  // a leaf's block (its point indices and points follow when it is popped)
                     const char* block = reinterpret_cast<const char*>(&scene_.leaf(node.child[c]));
                     prefetch_line(block);
-                    prefetch_line(block + LeafBlock::bytes(node.count[c]) - 1);
+                    prefetch_line(block + LeafBlock::bytes(leaf_size(node.count[c])) - 1);
                 }
                 stack[top++] = {node.child[c], node.count[c], extent[0][c], nearest[c], rects[c]};
             }

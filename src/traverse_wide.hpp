@@ -14,6 +14,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "camera_rays.hpp"
 #include "kernel_watertight.hpp"
 #include "lanes.hpp"
 #include "traverse.hpp"
@@ -41,7 +42,9 @@ class FloatLanes {
         const __m128d sign_d = _mm_set1_pd(-0.0);
         const __m128d o01 = _mm_sub_pd(_mm_loadu_pd(ray.org), _mm_loadu_pd(anchor));
         const __m128d o2 = _mm_sub_sd(_mm_load_sd(ray.org + 2), _mm_load_sd(anchor + 2));
-        const __m128d d01 = _mm_loadu_pd(ray.dir), d2 = _mm_load_sd(ray.dir + 2);
+        // (dir[0] and dir[1] read apart: a ray just made is often stored as four doubles
+        // and four, and a read across the two stores waits for them to reach the cache)
+        const __m128d d01 = _mm_loadh_pd(_mm_load_sd(ray.dir), ray.dir + 1), d2 = _mm_load_sd(ray.dir + 2);
         const auto unusable = [&](__m128d o, __m128d d) {  // (the unused fourth lane is 0, 0)
             const __m128d far_origin = _mm_cmpnle_pd(_mm_andnot_pd(sign_d, o), _mm_set1_pd(0x1p60));  // (or NaN)
             const __m128d tiny_direction = _mm_and_pd(_mm_cmplt_pd(_mm_andnot_pd(sign_d, d), _mm_set1_pd(0x1p-60)),
@@ -152,9 +155,8 @@ struct NoSink {
 /// traversal's, whatever the order. The watertight kernel meets only the triangles
 /// TriangleFilter leaves (its verdicts are that kernel's); the other strategies meet every
 /// triangle, so their own errors stay theirs. The ray must outlive the search. Staged
-/// (kStaged), a leaf takes three steps after its block is asked for, as interleaved
-/// searches want: the filter, asking for the candidates' point indices; asking for their
-/// points; their test.
+/// (kStaged), a leaf takes two steps after its block and point indices are asked for, as
+/// interleaved searches want: the filter, asking for the candidates' points; their test.
 template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Lanes, bool kStaged = false,
           class Sink = NoSink>
 class WideSearch {
@@ -188,25 +190,18 @@ class WideSearch {
     /// a step may instead be one of a leaf's. False when the search is over.
     [[gnu::always_inline]] bool step() {
         if constexpr (kStaged) {
-            if (leaf_stage_ == 1) {  // the leaf's block is in cache: filter, ask for the candidates' point indices
-                leaf_candidates_ = candidates(leaf_.child, leaf_.count);
+            if (leaf_stage_ == 1) {  // the leaf's block and point indices are in cache: filter, ask for the candidates' points
+                leaf_candidates_ = candidates(leaf_.child, leaf_size(leaf_.count));
                 if (!leaf_candidates_) {
                     leaf_stage_ = 0;
                     return pop();
                 }
                 const uint32_t first = scene_.leaf(leaf_.child).first;
-                for (unsigned m = leaf_candidates_; m; m &= m - 1)
-                    prefetch_line(scene_.triangles.data() + 3 * std::size_t(first + __builtin_ctz(m)));
+                for (unsigned m = leaf_candidates_; m; m &= m - 1) scene_.prefetch_points(first + __builtin_ctz(m));
                 leaf_stage_ = 2;
                 return true;
             }
-            if (leaf_stage_ == 2) {  // then their points
-                const uint32_t first = scene_.leaf(leaf_.child).first;
-                for (unsigned m = leaf_candidates_; m; m &= m - 1) scene_.prefetch_points(first + __builtin_ctz(m));
-                leaf_stage_ = 3;
-                return true;
-            }
-            if (leaf_stage_ == 3) {
+            if (leaf_stage_ == 2) {
                 leaf_stage_ = 0;
                 return !test_leaf(leaf_.child, leaf_candidates_) && pop();
             }
@@ -369,9 +364,14 @@ class WideSearch {
             leaf_ = next;
             leaf_stage_ = 1;
             prefetch_block(reinterpret_cast<const char*>(&scene_.leaf(next.child)));
+            // (an address as an integer: past the array where the hint is wrong)
+            const uintptr_t indices = reinterpret_cast<uintptr_t>(scene_.triangles.data()) +
+                                      12 * std::size_t(leaf_first_hint(next.count));
+            prefetch_line(reinterpret_cast<const char*>(indices));
+            prefetch_line(reinterpret_cast<const char*>(indices + 12 * leaf_size(next.count) - 1));
             return After::step;
         } else {
-            return leaf(next.child, next.count) ? After::stop : After::pop;
+            return leaf(next.child, leaf_size(next.count)) ? After::stop : After::pop;
         }
     }
 
@@ -489,9 +489,28 @@ bool coherent(const Scene& scene, const Rays& rays, const std::vector<std::size_
     return spread < double(pairs) / 16;
 }
 
+/// A store of interleaved searches' hits (trace_rays_interleaved) that can ask the cache
+/// for what storing a hit on a triangle reads first (Writer::prefetch): its searches then
+/// store a hit one round of turns after asking, not at once: storing at once, every search
+/// in flight would wait at each hit for its triangle's input index, a read scattered over
+/// the mesh's triangles (in a scene beyond the caches, mostly a miss).
+template <class Writer>
+struct DeferredStore {
+    const Writer& writer;
+    template <class Real>
+    void operator()(std::size_t k, const Ray& ray, const Hit<Real>& hit, NoSink*) const {
+        writer(k, ray, hit);
+    }
+    void prefetch(uint32_t prim) const { writer.prefetch(prim); }
+};
+template <class Store>
+struct IsDeferred : std::false_type {};
+template <class Writer>
+struct IsDeferred<DeferredStore<Writer>> : std::true_type {};
+
 /// Closest (or any) hits of rays `which` of `rays`, handed to `store(k, ray, hit)`: up to
 /// kInFlight searches take turns a step at a time, each step ending where the search asks
-/// for memory (a node, a leaf's block, its candidates' point indices, their points), so
+/// for memory (a node, a leaf's block and point indices, its candidates' points), so
 /// that while one waits the others compute: single rays through a scene larger than the
 /// caches spend most of their time waiting. The answers are trace_ray's; rays finish in any
 /// order. With HitPolicy::all each search in flight has a sink of its own among `sinks`
@@ -504,10 +523,17 @@ template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Ra
 void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vector<std::size_t>& which,
                             const CastContext& context, Store&& store, Sink* sinks = nullptr, unsigned* nodes = nullptr) {
     using Search = WideSearch<Kernel, Real, kPolicy, FloatLanes, true, Sink>;
+    constexpr bool kDeferred = IsDeferred<std::decay_t<Store>>::value;
+    struct Finished {  // a hit whose store waits for a round of turns (DeferredStore)
+        std::size_t k;
+        Ray ray;
+        Hit<Real> hit;
+    };
     struct Slot {
         std::size_t k;
         Ray ray;
         std::optional<Search> search;
+        std::optional<Finished> finished;
     };
     Slot slots[kInFlight];
     int active = 0;
@@ -518,6 +544,9 @@ void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vec
         Sink* sink = sinks ? &sinks[i] : nullptr;
         while (next < which.size()) {
             const std::size_t k = which[next++];
+            if constexpr (std::is_same_v<Rays, ArrayRays>) {
+                if (next + kInFlight / 2 < which.size()) rays.prefetch(which[next + kInFlight / 2]);
+            }
             slot.ray = rays.ray(k);
             if constexpr (!std::is_same_v<Sink, NoSink>) {
                 if (sink) sink->start(k, slot.ray);
@@ -541,13 +570,32 @@ void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vec
     while (active > 0) {
         for (int i = 0; i < kInFlight; ++i) {
             Slot& slot = slots[i];
+            if constexpr (kDeferred) {
+                if (slot.finished) {
+                    store(slot.finished->k, slot.finished->ray, slot.finished->hit, nullptr);
+                    slot.finished.reset();
+                }
+            }
             if (!slot.search || slot.search->step()) continue;
             if (nodes) *nodes += slot.search->nodes();
-            store(slot.k, slot.ray, slot.search->hit(), sinks ? &sinks[i] : nullptr);
+            const Hit<Real>& hit = slot.search->hit();
+            if constexpr (kDeferred) {
+                if (hit.found()) {
+                    store.prefetch(hit.prim);
+                    slot.finished = Finished{slot.k, slot.ray, hit};
+                } else {
+                    store(slot.k, slot.ray, hit, nullptr);
+                }
+            } else {
+                store(slot.k, slot.ray, hit, sinks ? &sinks[i] : nullptr);
+            }
             slot.search.reset();
             if (!refill(i)) --active;
         }
     }
+    if constexpr (kDeferred)
+        for (Slot& slot : slots)
+            if (slot.finished) store(slot.finished->k, slot.finished->ray, slot.finished->hit, nullptr);
 }
 
 }  // namespace vrc

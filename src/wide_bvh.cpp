@@ -100,7 +100,7 @@ void place(Scene& scene, uint32_t from, uint32_t at, std::vector<PendingLeaf>& p
         }
         if (m.is_leaf()) {
             node.child[c] = add_leaf(m, pending, end);
-            node.count[c] = m.count;
+            node.count[c] = leaf_count(m.count, m.index);
         } else {
             node.child[c] = uint32_t(wide.size());
             wide.emplace_back();
@@ -156,7 +156,7 @@ void build_wide(Scene& scene, unsigned threads) {
                 node.bounds[3 + k][c] = c == 0 ? root.box.hi[k] : -std::numeric_limits<float>::infinity();
             }
             node.child[c] = c == 0 ? add_leaf(root, pending, end) : 0;
-            node.count[c] = c == 0 ? root.count : 0;
+            node.count[c] = c == 0 ? leaf_count(root.count, root.index) : 0;
         }
     }
     shrink_huge(wide);

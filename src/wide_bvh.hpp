@@ -10,9 +10,8 @@
 namespace vrc {
 
 /// One node, 256 bytes (four cache lines). Lane c is a child: a node (`count[c] == 0`, at
-/// `child[c]`), a leaf of `count[c]` triangles (its LeafBlock at word `child[c]` of the
-/// scene's leaf_bytes),
-/// or nothing
+/// `child[c]`), a leaf (its LeafBlock at word `child[c]` of the scene's leaf_bytes; its
+/// size and first triangle in `count[c]`, leaf_size and leaf_first_hint), or nothing
 /// (an empty box: lo = +inf, hi = -inf, which no ray enters). Boxes are the binary BVH's,
 /// single precision relative to the scene's anchor, rounded outward.
 struct alignas(64) WideNode {
@@ -22,6 +21,14 @@ struct alignas(64) WideNode {
     uint32_t count[kWidth];
 };
 static_assert(sizeof(WideNode) == 256, "wide nodes are meant to be four cache lines");
+
+/// A leaf lane's `count`: its triangles (1 to 8) in the low four bits, its first triangle
+/// above them, so that a search can ask for the leaf's point indices together with its
+/// block (the block holds the first triangle too, but reading it would wait for the block).
+/// The first triangle's low 28 bits only: beyond, the hint is wrong and only a request is.
+inline uint32_t leaf_count(uint32_t size, uint32_t first) { return size | first << 4; }
+inline uint32_t leaf_size(uint32_t count) { return count & 15; }
+inline uint32_t leaf_first_hint(uint32_t count) { return count >> 4; }
 
 /// A leaf's triangles (at most eight) as the single-ray filter reads them
 /// (triangle_filter.hpp): lane c is triangle first + c, each corner's coordinates relative
