@@ -20,7 +20,7 @@ namespace vrc {
 
 struct RayHit {
     uint64_t ray;
-    uint32_t triangle;  ///< input triangle index
+    uint32_t triangle;  ///< input triangle index (leaf order until CrossingSink::finish)
     int32_t facing;     ///< on an edge or vertex: +1 when the triangle faces the ray's origin, -1 else
     double t;           ///< in units of the ray's direction as given
     double b[3];        ///< weights of the triangle's points; exact zeros on its edges and vertices
@@ -72,7 +72,10 @@ struct CrossingSink {
     }
     void operator()(uint32_t i, double t, const double* b) {
         const uint32_t* tri = scene->triangles.data() + 3 * std::size_t(i);
-        RayHit h{k, scene->prim_ids[i], 0, ray->output(t), {b[0], b[1], b[2]}, {RayHit::kNone, RayHit::kNone}};
+        // (the input index asked for now and read in finish: read here, a scene beyond the
+        // caches held every search in flight at each hit until it came)
+        prefetch_line(scene->prim_ids.data() + i);
+        RayHit h{k, i, 0, ray->output(t), {b[0], b[1], b[2]}, {RayHit::kNone, RayHit::kNone}};
         const int zeros = (b[0] == 0) + (b[1] == 0) + (b[2] == 0);
         if (zeros == 0) {  // inside the triangle: a crossing of its own
             hits.push_back(h);
@@ -97,6 +100,11 @@ struct CrossingSink {
         h.facing = facing > 0 ? 1 : -1;
         hits.push_back(h);
     }
+    /// The ray's hits with their input triangle indices, made crossings (keep_crossings).
+    void finish() {
+        for (RayHit& h : hits) h.triangle = scene->prim_ids[h.triangle];
+        keep_crossings(hits);
+    }
 };
 
 /// The crossings of rays 0 .. n - 1 within [tmin, tmax], each ray's sorted by t:
@@ -115,7 +123,7 @@ void for_each_crossings(const Scene& scene, const ArrayRays& rays, unsigned thre
         CrossingSink sinks[kInFlight];
         for (CrossingSink& sink : sinks) sink.scene = &scene;
         auto finish = [&](CrossingSink& sink) {
-            keep_crossings(sink.hits);
+            sink.finish();
             each(p, std::size_t(sink.k), sink.hits);
         };
         std::vector<std::size_t> chunk;
