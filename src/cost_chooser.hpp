@@ -1,9 +1,8 @@
 // Two ways of doing a recurring piece of work with the same answers, picked by their
 // measured cost: which is cheaper depends on the scene and the rays in ways no count
-// predicts (tracing a sweep's rays one after another or several in flight: on the terrain's
-// grazing lidar rows the interleaved searches took 0.7x the time, on the frog's 1.3x; a
-// sweep's tiles as bundles or ray by ray: bundles took 0.3x to 0.5x on the frog, 1.1x on
-// the terrain's steep rings).
+// predicts (rays that follow one another, one after another or several in flight: it
+// depends on whether they find the scene in the caches; a sweep's tiles as bundles or ray
+// by ray: bundles took 0.3x to 0.5x on the frog, 1.1x on the terrain's steep rings).
 #pragma once
 
 #include <chrono>

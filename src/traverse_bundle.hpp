@@ -161,35 +161,26 @@ class BundleTracer {
         static constexpr double kNodesPerVisit = 10;
         double nodes_per_ray = -1;      // of the row's last tile traced ray by ray (-1: none yet)
         CostChooser bundles{true, 64};  // the row's tiles as bundles (tried first), or ray by ray
-        // rays one after another, or several in flight (a large scene's); the other way
-        // tried only every 64th tile: on the terrain one after another takes 1.7x the
-        // time, which each trial pays
-        CostChooser by_ray{false, 64};
         [[nodiscard]] double visit_budget() const {
             return nodes_per_ray < 0 ? kVisitsPerRay : std::clamp(nodes_per_ray / kNodesPerVisit, 0.25, double(kVisitsPerRay));
         }
     };
 
     /// Traces the tile's rays one by one: one after another, or several in flight where
-    /// the scene is larger than the caches and the worker measures that cheaper.
+    /// the scene is larger than the caches (the terrain's grazing rings wait for memory at
+    /// every node one after another; the frog's, which find it in the caches, lose little
+    /// in flight).
     void trace_by_ray(RowHistory& history) {
         unsigned nodes = 0;
-        const auto by_ray = [&](bool interleaved) {
-            if (!interleaved) {
-                for (int j = 0; j < n_; ++j) hit_[j] = trace_ray<KernelT, Real>(scene_, ray_[j], context_, NoSink{}, &nodes);
-            } else {
-                which_.resize(std::size_t(n_));
-                std::iota(which_.begin(), which_.end(), std::size_t(0));
-                const auto take = [&](std::size_t j, const Ray&, const Hit<Real>& hit, NoSink*) { hit_[j] = hit; };
-                trace_rays_interleaved<KernelT, Real, HitPolicy::closest>(scene_, TileRays{ray_}, which_, context_, take,
-                                                                          static_cast<NoSink*>(nullptr), &nodes);
-            }
-            return double(nodes);
-        };
-        if (scene_.ray_bytes() >= kInterleavedBytes)
-            history.by_ray.run(by_ray);
-        else
-            by_ray(false);
+        if (scene_.ray_bytes() < kInterleavedBytes) {
+            for (int j = 0; j < n_; ++j) hit_[j] = trace_ray<KernelT, Real>(scene_, ray_[j], context_, NoSink{}, &nodes);
+        } else {
+            which_.resize(std::size_t(n_));
+            std::iota(which_.begin(), which_.end(), std::size_t(0));
+            const auto take = [&](std::size_t j, const Ray&, const Hit<Real>& hit, NoSink*) { hit_[j] = hit; };
+            trace_rays_interleaved<KernelT, Real, HitPolicy::closest>(scene_, TileRays{ray_}, which_, context_, take,
+                                                                      static_cast<NoSink*>(nullptr), &nodes);
+        }
         history.nodes_per_ray = double(nodes) / n_;
     }
 

@@ -467,8 +467,8 @@ constexpr std::size_t kInterleavedBytes = std::size_t(2) << 20;
 /// rows): consecutive rays' origins within a sixteenth of the scene's size and directions
 /// within a sixteenth of a radian, on average over every eighth pair (as telling as every
 /// pair, at an eighth of the cost). Such rays may find the scene in the caches one after
-/// another, or not (the frog's lidar rays took 1.3x the time in flight, the terrain's
-/// 0.7x): for them the cheaper way is measured (CostChooser); others always go in flight.
+/// another (rays sweeping the frog), or not (rays grazing the terrain): for them the
+/// cheaper way is measured (CostChooser); others always go in flight.
 template <class Rays>
 bool coherent(const Scene& scene, const Rays& rays, const std::vector<std::size_t>& which) {
     if (which.size() < 2) return true;
