@@ -313,9 +313,9 @@ class WideSearch {
 
     /// Asks memory for what lane c of `node` leads to, a node or a leaf's block, chosen
     /// without a branch (whether a lane is a leaf follows no pattern the predictor learns).
-    /// Only the second of two entered lanes is asked for when pushed: a scene beyond the
-    /// caches (the terrain's lidar rows traced one after another) then waits less for it,
-    /// while the sorted pushes of three or more stay cheap for scenes in the caches.
+    /// Only the second of two entered lanes is asked for when pushed: rays that follow one
+    /// another through a scene beyond the caches, traced one after another, then wait less
+    /// for it, while the sorted pushes of three or more stay cheap for scenes in the caches.
     [[gnu::always_inline]] void prefetch_child(const WideNode& node, int c) const {
         const uint32_t child = node.child[c];
         // (addresses as integers: the one not chosen may lie outside its array)
@@ -544,7 +544,7 @@ void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vec
         Sink* sink = sinks ? &sinks[i] : nullptr;
         while (next < which.size()) {
             const std::size_t k = which[next++];
-            if constexpr (std::is_same_v<Rays, ArrayRays>) {
+            if constexpr (std::is_same_v<Rays, ArrayRays>) {  // (other rays are computed, or in the cache)
                 if (next + kInFlight / 2 < which.size()) rays.prefetch(which[next + kInFlight / 2]);
             }
             slot.ray = rays.ray(k);
