@@ -84,7 +84,7 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
 
         camera = sensors.scene_lidar(mesh, args.scene)
     elif args.scene not in ("bumpy", "small"):
-        camera = scenes.view(mesh, args.view, n)
+        camera = scenes.view(mesh, args.view, n, scene=args.scene)
     options = ARRAYS[args.arrays] if args.arrays in ARRAYS else {"arrays": args.arrays.split(",")}
     compared = options.get("arrays", ["TriangleId"])[0]
 
@@ -119,7 +119,7 @@ def main() -> None:
         "--scene", choices=["frog", "channels", "terrain", "bumpy", "small", "sphere", "ant"], default="frog"
     )
     parser.add_argument(
-        "--view", choices=["framed", "close", "full", "lidar", "rays", "occluded", "crossings"], default="framed"
+        "--view", choices=["framed", "close", "full", "inside", "lidar", "rays", "occluded", "crossings"], default="framed"
     )
     parser.add_argument("--rays", type=int, default=500_000, help="rays of --view rays, occluded and crossings")
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")

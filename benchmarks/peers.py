@@ -62,8 +62,8 @@ def main() -> None:
         peer = Open3DPeer()
         peer.build(scene.prepared.points, scene.prepared.triangles)
         sizes[name] = scene.n_triangles
-        for view in scenes.ZOOMS:
-            camera = scenes.view(mesh, view, n)
+        for view in scenes.VIEWS:
+            camera = scenes.view(mesh, view, n, scene=name)
             rays = peer.prepare(*camera_rays(camera))
             ids = np.asarray(scene.cast(camera, arrays=["TriangleId"])["TriangleId"])
             coverage[name, view] = float(np.mean(ids >= 0))

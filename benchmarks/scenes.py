@@ -46,10 +46,23 @@ SCENES: dict[str, Callable[[], pv.PolyData]] = {"frog": frog, "channels": channe
 #: Zoom factors of the framing camera: 1 frames the whole model (much of the frame empty),
 #: larger ones come closer until the model fills the frame.
 ZOOMS = {"framed": 1.0, "close": 1.8, "full": 3.5}
+#: The views of each scene: the framing camera zoomed, then a walk-through (or, over the
+#: terrain, a fly-over): the eye inside the model's box, triangles all around it.
+VIEWS = (*ZOOMS, "inside")
 
 
-def view(mesh: pv.PolyData, name: str, pixels: int) -> vrc.Camera:
-    """The camera ``name`` (a key of ZOOMS) of ``mesh``: the iso framing, zoomed."""
+def inside(mesh: pv.PolyData, scene: str) -> np.ndarray:
+    """A point inside the box of scene ``scene``: its middle (the terrain's 2 above it)."""
+    low, high = np.array(mesh.bounds[0::2]), np.array(mesh.bounds[1::2])
+    return (low + high) / 2 + (np.array([0, 0, 2.0]) if scene == "terrain" else 0)
+
+
+def view(mesh: pv.PolyData, name: str, pixels: int, scene: str = "") -> vrc.Camera:
+    """The camera ``name`` (of VIEWS) of ``mesh`` (of scene ``scene``): the iso framing,
+    zoomed, or from ``inside``, 90 degrees wide, looking a little down."""
+    if name == "inside":
+        eye = inside(mesh, scene)
+        return vrc.Camera(eye, eye + [1.0, 0.3, -0.3], (0, 0, 1), view_angle=90, nx=pixels, ny=pixels)
     base = vrc.Camera.framing(mesh.bounds, view="iso", nx=pixels, ny=pixels)
     angle = math.degrees(2 * math.atan(math.tan(math.radians(base.view_angle) / 2) / ZOOMS[name]))
     return base.replace(view_angle=angle)

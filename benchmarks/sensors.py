@@ -44,8 +44,7 @@ def main() -> None:
 
 def scene_lidar(mesh, name: str, elevations: np.ndarray = ELEVATIONS, steps: int = 2048) -> vrc.Lidar:
     """The lidar of scene ``name``: in the middle of its box (the terrain's 2 above it)."""
-    low, high = np.array(mesh.bounds[0::2]), np.array(mesh.bounds[1::2])
-    return vrc.Lidar((low + high) / 2 + (np.array([0, 0, 2.0]) if name == "terrain" else 0), elevations, steps)
+    return vrc.Lidar(scenes.inside(mesh, name), elevations, steps)
 
 
 def compare(name: str, elevations: np.ndarray, args: argparse.Namespace) -> None:

@@ -35,25 +35,24 @@ class TriangleBins {
     TriangleBins(const Scene& scene, const CameraRays& rays, const ProjectedScene& projected, unsigned workers)
         : scene_(scene), projected_(projected), workers_(workers), n_tiles_(rays.n_tiles()),
           tiles_x_((rays.spec().nx + CameraRays::kTile - 1) / CameraRays::kTile),
-          lists_(std::size_t(workers) * n_tiles_), unknown_(workers) {}
+          lists_(std::size_t(workers) * n_tiles_) {}
 
     /// Worker w's share of the triangles, each into the tiles of the pixels it may cover.
     void bin(unsigned w) {
         std::vector<Entry>* lists = lists_.data() + std::size_t(w) * n_tiles_;
-        unknown_[w].clear();
         for (std::size_t i = share(w), end = share(w + 1); i < end; ++i) {
             const uint32_t* tri = scene_.triangles.data() + 3 * i;
 #if defined(__SSE4_1__)
             const __m128 pa = _mm_load_ps(projected_[tri[0]]), pb = _mm_load_ps(projected_[tri[1]]),
                          pc = _mm_load_ps(projected_[tri[2]]);
             const __m128 lo = _mm_min_ps(_mm_min_ps(pa, pb), pc), hi = _mm_max_ps(_mm_max_ps(pa, pb), pc);
+            if (_mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) != 0) {  // a point with no usable projection
+                add_cone(lists, uint32_t(i), tri);
+                continue;
+            }
             const __m128 span = projected_.pixel_span(lo, hi);  // (c0, c1, r0, r1)
             // most triangles of a fine mesh cover no pixel centre: c0 > c1 or r0 > r1
             if (_mm_movemask_ps(_mm_cmpgt_ps(span, _mm_shuffle_ps(span, span, _MM_SHUFFLE(2, 3, 0, 1)))) & 0b0101) continue;
-            if (_mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) != 0) {  // a point with no usable projection
-                unknown_[w].push_back(uint32_t(i));
-                continue;
-            }
             const float near = projected_.near_bound(_mm_cvtss_f32(_mm_movehl_ps(lo, lo)), _mm_cvtss_f32(_mm_movehl_ps(hi, hi)));
             if (near == HUGE_VALF) continue;
             alignas(16) int32_t p[4];
@@ -62,7 +61,7 @@ class TriangleBins {
 #else
             ImageRect rect;
             const ProjectedScene::Reach reach = projected_.frame_triangle(tri, rect);
-            if (reach == ProjectedScene::Reach::unknown) unknown_[w].push_back(uint32_t(i));
+            if (reach == ProjectedScene::Reach::unknown) add_cone(lists, uint32_t(i), tri);
             if (reach != ProjectedScene::Reach::rect) continue;
             const Footprint footprint = projected_.footprint(uint32_t(i));
             for (int64_t r = rect.r0; r <= rect.r1; ++r)
@@ -77,13 +76,6 @@ class TriangleBins {
         return lists_[std::size_t(w) * n_tiles_ + tile];
     }
     [[nodiscard]] unsigned workers() const { return workers_; }
-    /// Triangles with no usable projection (crossing a pinhole's eye plane), in input order.
-    [[nodiscard]] std::vector<uint32_t> unknown() const {
-        std::vector<uint32_t> all;
-        for (const auto& u : unknown_) all.insert(all.end(), u.begin(), u.end());
-        return all;
-    }
-
    private:
     static constexpr int64_t kTile = CameraRays::kTile;
     /// Triangles over more pixels than this are binned as a rectangle per tile, tested
@@ -107,6 +99,14 @@ class TriangleBins {
             for (int64_t tx = c0 >> kShift; tx <= c1 >> kShift; ++tx)
                 lists[tx + ty * tiles_x_].push_back({near, HUGE_VALF, i, local(c0, tx * kTile), local(c1, tx * kTile),
                                                      local(r0, ty * kTile), local(r1, ty * kTile)});
+    }
+
+    /// Triangle i, whose points `tri` include one with no usable projection (near or behind
+    /// a pinhole's eye plane), on its rectangle (ProjectedScene::cone_rect), if any.
+    void add_cone(std::vector<Entry>* lists, uint32_t i, const uint32_t tri[3]) const {
+        ImageRect rect;
+        if (projected_.frame_triangle(tri, rect) != ProjectedScene::Reach::none)
+            add_rect(lists, i, rect.near, rect.c0, rect.c1, rect.r0, rect.r1);
     }
 
 #if defined(__SSE4_1__)
@@ -138,7 +138,6 @@ class TriangleBins {
     std::size_t n_tiles_;
     int64_t tiles_x_;
     std::vector<std::vector<Entry>> lists_;  // (worker, tile)
-    std::vector<std::vector<uint32_t>> unknown_;  // per worker
 };
 
 }  // namespace vrc

@@ -20,6 +20,7 @@
 
 #include "bvh.hpp"
 #include "camera_rays.hpp"
+#include "exact_sign.hpp"
 #include "kernel_common.hpp"
 
 namespace vrc {
@@ -211,11 +212,10 @@ class ProjectedScene {
         const CameraSpec& c = rays.spec();
         double depth_size = 0, parallel_size = std::fabs(map_.col0) + std::fabs(map_.row0);
         for (int k = 0; k < 3; ++k) {
-            to_anchor_[k] = scene.anchor[k] - c.eye[k];
             // farthest reach of the scene's box from the anchor on this axis
-            reach_[k] = std::max(std::fabs(double(scene.bounds.lo[k])), std::fabs(double(scene.bounds.hi[k])));
-            if (!(reach_[k] < HUGE_VAL)) reach_[k] = 0;  // empty scene
-            const double extent = std::fabs(to_anchor_[k]) + reach_[k];  // bounds |P - eye| on axis k
+            double reach = std::max(std::fabs(double(scene.bounds.lo[k])), std::fabs(double(scene.bounds.hi[k])));
+            if (!(reach < HUGE_VAL)) reach = 0;  // empty scene
+            const double extent = std::fabs(scene.anchor[k] - c.eye[k]) + reach;  // bounds |P - eye| on axis k
             depth_size += std::fabs(map_.depth[k]) * extent;
             parallel_size += std::max(std::fabs(map_.col[k]), std::fabs(map_.row[k])) * extent;
         }
@@ -304,17 +304,92 @@ class ProjectedScene {
     enum class Reach { none, rect, unknown };
     /// The image pixels through which triangle `tri` may be hit, and its nearest depth:
     /// none (its projection misses the image, or its depths all lie outside [near, far]),
-    /// rect, or unknown (a point has no usable projection: every pixel).
+    /// rect, or unknown (a point has no usable projection: the rectangle of cone_rect).
     [[nodiscard]] Reach frame_triangle(const uint32_t tri[3], ImageRect& out) const {
 #if defined(__SSE4_1__)
         const __m128 pa = _mm_load_ps((*this)[tri[0]]), pb = _mm_load_ps((*this)[tri[1]]), pc = _mm_load_ps((*this)[tri[2]]);
         const __m128 hi = _mm_max_ps(_mm_max_ps(pa, pb), pc);
         store(rect4(_mm_min_ps(_mm_min_ps(pa, pb), pc), hi, out.near), out);
         if (out.empty()) return Reach::none;
-        return _mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) != 0 ? Reach::unknown : Reach::rect;
+        const Reach reach = _mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) != 0 ? Reach::unknown : Reach::rect;
 #else
-        return frame_points(tri, tri + 3, out);
+        const Reach reach = frame_points(tri, tri + 3, out);
 #endif
+        if (reach != Reach::unknown) return reach;
+        out = cone_rect(tri, out.near);
+        return out.empty() ? Reach::none : Reach::unknown;
+    }
+
+    /// The pixels through which a triangle with a point of no usable projection (near or
+    /// behind a pinhole's eye plane) may be hit, `near` its nearest depth: those whose
+    /// centres lie in the image's part of the cone from the eye over the triangle. In the
+    /// homogeneous pixel coordinates h = (column, row, 1) depth of a point relative to the
+    /// eye (PixelMap: a linear map), a ray through pixel (c, r) hits the triangle ABC only
+    /// if (c, r, 1) = a h_A + b h_B + c h_C with a, b, c >= 0, i.e. the edge functions
+    /// (h_A x h_B) . (c, r, 1) and the other two all have the sign of det[h_A, h_B, h_C]
+    /// (2D homogeneous rasterisation, Olano and Greer, "Triangle scan conversion using 2D
+    /// homogeneous coordinates", Graphics Hardware 1997: no division by a depth, so points
+    /// behind the eye need no clipping). The image's rectangle of pixel centres is clipped
+    /// by the three half-planes widened by their roundings (the pixel ray's own margin, as
+    /// Footprint's, times the edge's slope; 64 eps of the products' sizes for the points'
+    /// and the products' roundings, far above them), and its box, widened by a millionth of
+    /// a pixel for the clipping's roundings, is the rectangle. When the eye lies within
+    /// rounding of the triangle's plane, the determinant's sign is taken exactly (the
+    /// map's own determinant is far from zero), and exactly on it see `through_eye`.
+    [[nodiscard]] ImageRect cone_rect(const uint32_t tri[3], float near) const {
+        const CameraSpec& c = rays_.spec();
+        const double last_col = double(c.nx) - 1, last_row = double(c.ny) - 1;
+        const ImageRect every{0, uint16_t(last_col), 0, uint16_t(last_row), near};
+        double h[3][3], size[3];
+        for (int v = 0; v < 3; ++v) {
+            const double* p = scene_.point(tri[v]);
+            const double q[3] = {p[0] - c.eye[0], p[1] - c.eye[1], p[2] - c.eye[2]};
+            h[v][0] = dot(map_.col, q), h[v][1] = dot(map_.row, q), h[v][2] = dot(map_.depth, q);
+            size[v] = 0;
+            for (int k = 0; k < 3; ++k)
+                size[v] += (std::fabs(map_.col[k]) + std::fabs(map_.row[k]) + std::fabs(map_.depth[k])) * std::fabs(q[k]);
+        }
+        double edge[3][3], slack[3];
+        for (int k = 0; k < 3; ++k) {
+            const double *a = h[k], *b = h[(k + 1) % 3];
+            edge[k][0] = a[1] * b[2] - a[2] * b[1], edge[k][1] = a[2] * b[0] - a[0] * b[2], edge[k][2] = a[0] * b[1] - a[1] * b[0];
+            slack[k] = (std::fabs(edge[k][0]) + std::fabs(edge[k][1])) * map_.margin +
+                       64 * kEps * size[k] * size[(k + 1) % 3] * (last_col + last_row + 3);
+        }
+        const double det = dot(edge[0], h[2]);
+        double sign = det > 0 ? 1 : -1;
+        if (!(std::fabs(det) > 64 * kEps * size[0] * size[1] * size[2])) {
+            const int side = exact::volume(scene_.point(tri[0]), scene_.point(tri[1]), scene_.point(tri[2]), c.eye);
+            if (side == 0) return through_eye(tri) ? every : kNoPixels;
+            double row_depth[3];
+            cross(map_.row, map_.depth, row_depth);
+            sign = side * (dot(map_.col, row_depth) > 0 ? 1 : -1);
+        }
+        // Sutherland-Hodgman: each half-plane adds at most one corner to the four
+        double x[8] = {0, last_col, last_col, 0}, y[8] = {0, 0, last_row, last_row};
+        int n = 4;
+        for (int k = 0; k < 3 && n > 0; ++k) {
+            const auto f = [&](int i) { return sign * (edge[k][0] * x[i] + edge[k][1] * y[i] + edge[k][2]) + slack[k]; };
+            double cx[8], cy[8], fv[8];
+            for (int i = 0; i < n; ++i) fv[i] = f(i);
+            int m = 0;
+            for (int i = 0; i < n; ++i) {
+                const int j = (i + 1) % n;
+                if (fv[i] >= 0) cx[m] = x[i], cy[m] = y[i], ++m;
+                if ((fv[i] >= 0) != (fv[j] >= 0)) {
+                    const double t = fv[i] / (fv[i] - fv[j]);
+                    cx[m] = x[i] + t * (x[j] - x[i]), cy[m] = y[i] + t * (y[j] - y[i]), ++m;
+                }
+            }
+            std::copy(cx, cx + m, x), std::copy(cy, cy + m, y), n = m;
+        }
+        if (n == 0) return kNoPixels;
+        constexpr double kRounding = 1e-6;
+        const auto [c0, c1] = std::minmax_element(x, x + n);
+        const auto [r0, r1] = std::minmax_element(y, y + n);
+        const ImageRect rect{uint16_t(std::max(0.0, std::ceil(*c0 - kRounding))), uint16_t(std::min(last_col, std::floor(*c1 + kRounding))),
+                             uint16_t(std::max(0.0, std::ceil(*r0 - kRounding))), uint16_t(std::min(last_row, std::floor(*r1 + kRounding))), near};
+        return rect.empty() || rect.r0 > rect.r1 ? kNoPixels : rect;
     }
 
 #if defined(__SSE4_1__)
@@ -435,7 +510,23 @@ class ProjectedScene {
         r.c0 = _mm256_blendv_ps(r.c0, none, empty), r.c1 = _mm256_blendv_ps(r.c1, zero, empty);
         r.r0 = _mm256_blendv_ps(r.r0, none, empty), r.r1 = _mm256_blendv_ps(r.r1, zero, empty);
         r.near = _mm256_blendv_ps(r.near, _mm256_set1_ps(HUGE_VALF), empty);
+        if (const unsigned cones = unsigned(_mm256_movemask_ps(_mm256_andnot_ps(empty, r.unknown)))) with_cones(r, first, cones);
         return r;
+    }
+    /// Lanes `cones` of r (triangles from `first` with a point of no usable projection):
+    /// their rectangles from cone_rect instead of the whole image.
+    void with_cones(Rects8& r, uint32_t first, unsigned cones) const {
+        alignas(32) float c0[8], c1[8], r0[8], r1[8], near[8];
+        _mm256_store_ps(c0, r.c0), _mm256_store_ps(c1, r.c1), _mm256_store_ps(r0, r.r0), _mm256_store_ps(r1, r.r1);
+        _mm256_store_ps(near, r.near);
+        for (; cones != 0; cones &= cones - 1) {
+            const int k = __builtin_ctz(cones);
+            const ImageRect rect = cone_rect(scene_.triangles.data() + 3 * std::size_t(first + k), near[k]);
+            c0[k] = float(rect.c0), c1[k] = float(rect.c1), r0[k] = float(rect.r0), r1[k] = float(rect.r1);
+            if (rect.empty()) near[k] = HUGE_VALF;
+        }
+        r.c0 = _mm256_load_ps(c0), r.c1 = _mm256_load_ps(c1), r.r0 = _mm256_load_ps(r0), r.r1 = _mm256_load_ps(r1);
+        r.near = _mm256_load_ps(near);
     }
     /// Footprint's test and the sure-hit test (see SureHits) of the eight triangles of `q`
     /// on the rays of kPixels pixels each, lane k's p-th at (col[p], row[p]): which lanes
@@ -523,8 +614,6 @@ class ProjectedScene {
         const uint32_t *p = scene_.triangles.data() + 3 * std::size_t(first), *end = p + 3 * count;
         for (; p != end; ++p) prefetch_line(points_ + 4 * std::size_t(*p));
     }
-    [[nodiscard]] const double* to_anchor() const { return to_anchor_; }  ///< anchor - eye
-    [[nodiscard]] const double* reach() const { return reach_; }          ///< box extent from the anchor
     [[nodiscard]] double depth_slack() const { return depth_slack_; }     ///< rounding of any depth
     [[nodiscard]] float margin() const { return margin_; }                ///< see Footprint
 
@@ -652,8 +741,30 @@ class ProjectedScene {
     /// next leaves' (compare_builds, frog 1024x1024, 2 threads, two processes per build:
     /// 0.959x the time; 8, 32 and 64 ahead alike).
     static constexpr std::ptrdiff_t kAhead = 16;
+    /// Whether a pixel's ray may hit a triangle whose plane holds the eye exactly. Such a
+    /// ray meets it at the eye alone (the kernel's t = 0; a ray within the plane misses):
+    /// only with no near distance, and only when the eye lies on the triangle (exact
+    /// orientations of the eye against each edge, in a plane of two axes where the
+    /// triangle has an area; a triangle with none misses every ray).
+    [[nodiscard]] bool through_eye(const uint32_t tri[3]) const {
+        const CameraSpec& c = rays_.spec();
+        if (c.near > 0) return false;
+        const double* p[3] = {scene_.point(tri[0]), scene_.point(tri[1]), scene_.point(tri[2])};
+        for (int k = 0; k < 3; ++k) {
+            double axis[3] = {0, 0, 0};
+            axis[k] = 1;
+            const int area = exact::orientation(p[1], p[2], p[0], axis);
+            if (area == 0) continue;
+            for (int j = 0; j < 3; ++j)
+                if (exact::orientation(p[j], p[(j + 1) % 3], c.eye, axis) == -area) return false;
+            return true;
+        }
+        return false;
+    }
+
     /// Leaf i's rectangle: that of its points (each once), which holds each triangle's at
-    /// a fraction of the work.
+    /// a fraction of the work; or, when a point has no usable projection (the rectangle
+    /// would be the whole image), the join of its triangles' (cone_rect for those).
     void frame_leaf(uint32_t i) {
         const CameraTree& tree = scene_.camera;
         const uint32_t *p = tree.leaf_points.data() + tree.leaf_offsets[i], *end = tree.leaf_points.data() + tree.leaf_offsets[i + 1];
@@ -667,9 +778,17 @@ class ProjectedScene {
             hi = _mm_max_ps(hi, v);
         }
         store(rect4(lo, hi, node_[i].rect.near), node_[i].rect);
+        const bool unknown = _mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 3)) != 0 && !node_[i].rect.empty();
 #else
-        (void)frame_points(p, end, node_[i].rect);
+        const bool unknown = frame_points(p, end, node_[i].rect) == Reach::unknown;
 #endif
+        if (!unknown) return;
+        ImageRect joined = kNoPixels;
+        for (uint32_t t = node_[i].index, last = t + node_[i].count; t < last; ++t) {
+            ImageRect rect;
+            if (frame_triangle(scene_.triangles.data() + 3 * std::size_t(t), rect) != Reach::none) joined.join(rect);
+        }
+        node_[i].rect = joined;
     }
 
     /// Inner node i's rectangle: the join of its children's.
@@ -696,7 +815,7 @@ class ProjectedScene {
     ScratchPool::Block memory_;  // holds points_ and node_
     float* points_;
     ProjectedNode* node_;
-    double to_anchor_[3], reach_[3], depth_slack_;
+    double depth_slack_;
     float margin_, slack_, near_, far_;  // in single precision: see the constructor
     float sure_near_, sure_far_, sure_margin_;  // see SureHits
     std::atomic<std::size_t> next_subtree_{0};

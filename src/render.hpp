@@ -81,22 +81,21 @@ struct CameraCast {
         const std::size_t pixels = rays.pixels_may_hit();
         return !scene.has_bvh() || pixels == 0 || kElementsPerPixel * pixels >= scene.points.size() / 3 + scene.camera.nodes.size();
     }
-    /// Worker w's share of the preparation; returns the triangles every tile tests. None
-    /// when no pixel may see the scene: every tile is then a miss.
-    std::vector<uint32_t> prepare(unsigned w, unsigned workers, const CameraRays& rays) {
-        if (!rays.may_hit()) return {};
+    /// Worker w's share of the preparation (none when no pixel may see the scene: every
+    /// tile is then a miss).
+    void prepare(unsigned w, const CameraRays& rays) {
+        if (!rays.may_hit()) return;
         if (!bins) {
             projected.project_and_frame();
             barrier.wait();
             if (w == 0) projected.frame_top();
             barrier.wait();
-            return {};
+            return;
         }
         projected.project();
         barrier.wait();
         bins->bin(w);
         barrier.wait();
-        return bins->unknown();
     }
     ProjectedScene projected;
     std::optional<TriangleBins> bins;
@@ -194,12 +193,12 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         }
         if constexpr (kTiles) {
             if (camera) {
-                const std::vector<uint32_t> unknown = camera->prepare(w, n_workers, rays);
+                camera->prepare(w, rays);
                 TileTracer<Kernel, Real> tracer(scene, rays, camera->projected, context, !out.needs_hit_point(),
                                                 out.has_point_fields());
                 for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
                     if (camera->bins && rays.tile_may_hit(tile))
-                        tracer.trace_bin(tile, *camera->bins, unknown, store);
+                        tracer.trace_bin(tile, *camera->bins, store);
                     else
                         tracer.trace(tile, store);
                     tile_done();

@@ -42,13 +42,6 @@ class TileTracer {
     using Kernel = KernelT<Real>;
     static constexpr double kEps = std::numeric_limits<double>::epsilon();
 
-    /// a.q + c >= -slack for every point q = P - eye a ray of the tile can reach, where
-    /// c folds in the plane's constant and a.(anchor - eye); P - eye = (anchor - eye) + rel
-    /// for a box corner rel (boxes are stored relative to the scene's anchor).
-    struct Plane {
-        double a[3], c, slack;
-    };
-
    public:
     /// `by_triangle`: the cast asks only for what the hit triangle decides, not the hit's
     /// depth or weights (see test_pixel). `point_rows`: it interpolates the mesh's point
@@ -95,14 +88,13 @@ class TileTracer {
     }
 
     /// A flat scene's tile (no BVH) that may see the scene: the pixels its triangles may
-    /// cover (`bins`, see bin_triangles.hpp), then the triangles with no usable projection
-    /// (`unknown`), which are tested on the whole tile unless the tile's frustum separates
-    /// them. Each pixel first tests its likely hit (the nearest triangle whose projection
-    /// seems to cover its centre), whose depth then culls the rest.
+    /// cover (`bins`, see bin_triangles.hpp). Each pixel first tests its likely hit (the
+    /// nearest triangle whose projection seems to cover its centre), whose depth then culls
+    /// the rest.
     template <class Store>
-    void trace_bin(std::size_t tile, const TriangleBins& bins, const std::vector<uint32_t>& unknown, Store&& store) {
+    void trace_bin(std::size_t tile, const TriangleBins& bins, Store&& store) {
         const CameraRays::TilePixels p = rays_.tile_pixels(tile);
-        bool any = !unknown.empty();
+        bool any = false;
         for (unsigned w = 0; w < bins.workers(); ++w) any |= !bins.list(w, tile).empty();
         if (!any) return misses(p, store);
         start(p);
@@ -124,9 +116,6 @@ class TileTracer {
                 if (double(e.near) > depth_bound_[j] || (guess_far_[j] < HUGE_VALF && guess_[j] == e.triangle)) continue;
                 test_pixel(e.c0, e.r0, e.triangle);
             }
-        if (!unknown.empty()) set_sides(p);
-        for (uint32_t i : unknown)
-            if (!separated(i)) test_pixels(i, {0, width_ - 1, 0, height_ - 1});
         finish(store);
     }
 
@@ -278,32 +267,6 @@ class TileTracer {
         return std::size_t((i0_ + j % kStride) + (r0_ + j / kStride) * int64_t(rays_.spec().nx));
     }
 
-    /// Half-space a.q + b >= 0 of q = P - eye, with its rounding slack over the scene.
-    [[nodiscard]] Plane plane(const double a[3], double b) const {
-        Plane h;
-        double size = std::fabs(b);
-        h.c = b;
-        for (int k = 0; k < 3; ++k) {
-            h.a[k] = a[k];
-            h.c += a[k] * projected_.to_anchor()[k];
-            size += std::fabs(a[k]) * (std::fabs(projected_.to_anchor()[k]) + projected_.reach()[k]);
-        }
-        h.slack = 16 * kEps * size;
-        return h;
-    }
-
-    /// Column (or row) >= lo, written as a half-space of q: form.q + form0 - lo (den.q + den0).
-    [[nodiscard]] Plane at_least(const double form[3], double form0, double lo) const {
-        double a[3];
-        for (int k = 0; k < 3; ++k) a[k] = form[k] - lo * map_.den[k];
-        return plane(a, form0 - lo * map_.den0);
-    }
-    [[nodiscard]] Plane at_most(const double form[3], double form0, double hi) const {
-        double a[3];
-        for (int k = 0; k < 3; ++k) a[k] = hi * map_.den[k] - form[k];
-        return plane(a, hi * map_.den0 - form0);
-    }
-
     /// Whether a node may hold a triangle some ray of the block reaches before its hit:
     /// its rectangle meets the block, and some 2x2 quad of pixels there still searches
     /// beyond the node's nearest depth (a hierarchical depth test, in the spirit of Greene,
@@ -315,35 +278,6 @@ class TileTracer {
             for (int64_t c = p.c0 >> 1; c <= p.c1 >> 1; ++c)
                 if (quad_[c + r * kQuads] >= p.near) return true;
         return false;
-    }
-
-    /// The block's four side planes, one per lane.
-    void set_sides(const CameraRays::TilePixels& p) {
-        const double m = map_.margin;
-        const Plane side[4] = {at_least(map_.col, map_.col0, double(p.i0) - m), at_most(map_.col, map_.col0, double(p.i1) + m),
-                               at_least(map_.row, map_.row0, double(p.r0) - m), at_most(map_.row, map_.row0, double(p.r1) + m)};
-        for (int h = 0; h < 4; ++h) {
-            side_c_[h] = side[h].c;
-            side_floor_[h] = -side[h].slack;
-            for (int k = 0; k < 3; ++k) {
-                side_a_[k][h] = side[h].a[k];
-                side_hi_[k][h] = side[h].a[k] >= 0 ? -1 : 0;
-            }
-        }
-    }
-
-    /// Whether one side plane has all three points of triangle i outside.
-    [[nodiscard]] bool separated(uint32_t i) const {
-        Mask4 all_out = Mask4{} - 1;
-        const uint32_t* tri = scene_.triangles.data() + 3 * std::size_t(i);
-        for (int v = 0; v < 3; ++v) {
-            const double* p = scene_.point(tri[v]);
-            Double4 value = side_c_;
-            for (int k = 0; k < 3; ++k)  // relative to the anchor, as the planes' constants are
-                value += side_a_[k] * (p[k] - scene_.anchor[k]);
-            all_out &= value < side_floor_;
-        }
-        return any(all_out);
     }
 
     /// The tile's traversal from its entry node: visible children nearest first,
@@ -657,8 +591,6 @@ class TileTracer {
     const ProjectedScene& projected_;
     CastContext context_;
     CameraRays::PixelMap map_;
-    Double4 side_c_, side_floor_, side_a_[3];  // the side planes, one per lane
-    Mask4 side_hi_[3];                         // lanes whose plane takes the box's hi corner on axis k
     int64_t i0_ = 0, r0_ = 0, width_ = 0, height_ = 0;  // the block: a tile
     uint64_t made_[kStride];  // per row of the block, a bit for each pixel whose ray is made
     uint64_t sure_bits_[kStride];  // per row, a bit for each pixel settled by a sure hit (not made)

@@ -110,6 +110,56 @@ def test_eye_inside_a_closed_mesh(offset):
     assert assert_same_as_ray_by_ray(vrc.Scene(star_mesh(cam)), cam) == 33 * 25
 
 
+@pytest.mark.parametrize("offset", [0.0, 1e5])
+@pytest.mark.parametrize("view_angle", [60, 120, 170])
+def test_eye_inside_a_large_mesh(offset, view_angle):
+    # Large enough that the camera path prepares the scene: the triangles crossing the eye's
+    # plane get the rectangles of their cones over the image (ProjectedScene::cone_rect), and
+    # so do the leaves and nodes holding them (a flat scene bins them to those rectangles); a
+    # wrong rectangle would show as a miss or a farther triangle. The eye near the surface puts such triangles in the frame, nearby.
+    mesh = bumpy_sphere(5, offset=offset)  # 20 k triangles
+    scene = vrc.Scene(mesh)
+    built = scene.memory_bytes
+    centre = np.full(3, offset)
+    # a triangle's centre less a fraction of its size along its normal: inside, next to it
+    cell = 1234
+    normal = mesh.cell_normals[cell]
+    near_surface = mesh.cell_centers().points[cell] - centre - 0.005 * normal
+    tangent = np.cross(normal, [0, 0, 1])
+    views = [([0.0, 0.0, 0.0], [1, 2, 3]), (near_surface, tangent + 0.3 * normal), (near_surface, tangent - 0.5 * normal)]
+    for eye, towards in views:
+        cam = vrc.Camera(centre + eye, centre + eye + towards, (0, 0, 1), view_angle=view_angle, nx=128, ny=96)
+        assert assert_same_as_ray_by_ray(scene, cam) == 128 * 96
+    assert scene.memory_bytes > built  # (prepared, not ray by ray)
+    # against Open3D's Embree (float32: a few pixels along edges may differ)
+    import open3d as o3d
+
+    peer = o3d.t.geometry.RaycastingScene()
+    prepared = scene.prepared
+    peer.add_triangles(o3d.core.Tensor((prepared.points - centre).astype(np.float32)),
+                       o3d.core.Tensor(prepared.triangles.astype(np.uint32)))  # fmt: skip
+    origins, directions = camera_rays(cam)
+    ray_rows = np.hstack((origins - centre, directions)).astype(np.float32)
+    theirs = peer.cast_rays(o3d.core.Tensor(ray_rows))["primitive_ids"].numpy().astype(np.int64)
+    ours = np.asarray(scene.cast(cam, arrays=["TriangleId"])["TriangleId"])
+    assert np.mean(theirs == ours) > 0.995
+
+
+def test_eye_in_the_plane_of_a_terrain():
+    # Every triangle of a flat grid reaches behind the eye's plane and the eye lies in their
+    # plane (the cones degenerate): beyond `near` no pixel's ray meets the grid; from 0 every
+    # ray hits the triangle holding the eye, at the eye, and none from an eye off the grid.
+    # Then the eye a little above it.
+    grid = pv.Plane(i_size=4, j_size=4, i_resolution=100, j_resolution=100).triangulate()
+    scene = vrc.Scene(grid)
+    for eye, near, hits in (((0.013, 0.007, 0), 1e-3, 0), ((0.013, 0.007, 0), 0.0, 128 * 96), ((-2.5, 0.1, 0), 0.0, 0)):
+        cam = vrc.Camera(eye, np.add(eye, (1, 0.3, 0)), (0, 0, 1), view_angle=90, nx=128, ny=96, near=near)
+        assert assert_same_as_ray_by_ray(scene, cam) == hits
+    for height in (1e-9, 0.05):
+        cam = vrc.Camera((0, 0, height), (1, 0.3, -0.2), (0, 0, 1), view_angle=90, nx=128, ny=96)
+        assert assert_same_as_ray_by_ray(scene, cam) > 128 * 40
+
+
 def shuffled_layers(depths, tilt: float, seed: int = 3) -> pv.PolyData:
     """Square grids of large triangles stacked along z (each tilted by ``tilt`` along x),
     their triangles in a random order: the BVH's leaves mix the layers, so a pixel's
