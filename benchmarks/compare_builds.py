@@ -119,7 +119,9 @@ def main() -> None:
         "--scene", choices=["frog", "channels", "terrain", "bumpy", "small", "sphere", "ant"], default="frog"
     )
     parser.add_argument(
-        "--view", choices=["framed", "close", "full", "inside", "lidar", "rays", "occluded", "crossings"], default="framed"
+        "--view",
+        choices=["framed", "close", "full", "inside", "lidar", "rays", "occluded", "crossings"],
+        default="framed",
     )
     parser.add_argument("--rays", type=int, default=500_000, help="rays of --view rays, occluded and crossings")
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")

@@ -116,7 +116,8 @@ def test_eye_inside_a_large_mesh(offset, view_angle):
     # Large enough that the camera path prepares the scene: the triangles crossing the eye's
     # plane get the rectangles of their cones over the image (ProjectedScene::cone_rect), and
     # so do the leaves and nodes holding them (a flat scene bins them to those rectangles); a
-    # wrong rectangle would show as a miss or a farther triangle. The eye near the surface puts such triangles in the frame, nearby.
+    # wrong rectangle would show as a miss or a farther triangle. The eye near the surface
+    # puts such triangles in the frame, nearby.
     mesh = bumpy_sphere(5, offset=offset)  # 20 k triangles
     scene = vrc.Scene(mesh)
     built = scene.memory_bytes
@@ -126,7 +127,11 @@ def test_eye_inside_a_large_mesh(offset, view_angle):
     normal = mesh.cell_normals[cell]
     near_surface = mesh.cell_centers().points[cell] - centre - 0.005 * normal
     tangent = np.cross(normal, [0, 0, 1])
-    views = [([0.0, 0.0, 0.0], [1, 2, 3]), (near_surface, tangent + 0.3 * normal), (near_surface, tangent - 0.5 * normal)]
+    views = [
+        ([0.0, 0.0, 0.0], [1, 2, 3]),
+        (near_surface, tangent + 0.3 * normal),
+        (near_surface, tangent - 0.5 * normal),
+    ]
     for eye, towards in views:
         cam = vrc.Camera(centre + eye, centre + eye + towards, (0, 0, 1), view_angle=view_angle, nx=128, ny=96)
         assert assert_same_as_ray_by_ray(scene, cam) == 128 * 96
