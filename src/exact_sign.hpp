@@ -71,8 +71,19 @@ inline Short difference(double a, double b) {
     return s;
 }
 
+/// Whether a column is exactly the zero vector (its expansions' terms all zero).
+inline bool is_zero(const Short c[3]) {
+    for (int k = 0; k < 3; ++k)
+        for (int r = 0; r < c[k].n; ++r)
+            if (c[k].v[r] != 0) return false;
+    return true;
+}
+
 /// Exact sign of the 3x3 determinant whose columns are given as short expansions.
 inline int det3_sign(const Short c0[3], const Short c1[3], const Short c2[3]) {
+    // A ray leaving a vertex meets the two edges through it in a zero column: the
+    // expansions below would take hundreds of cycles to sum zeros.
+    if (is_zero(c0) || is_zero(c1) || is_zero(c2)) return 0;
     static constexpr int perm[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
     double total[256], sum[256];
     int n_total = 0;

@@ -148,3 +148,28 @@ def test_one_origin_and_a_grid_of_directions_equal_ray_by_ray(directions):
     assert 0.01 < np.mean(one_by_one["triangle_id"] >= 0) < 0.95
     for name in arrays:
         np.testing.assert_array_equal(bundled[name], one_by_one[name])
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e5])
+def test_rays_leaving_every_vertex_of_a_convex_mesh(offset):
+    # Each ray starts exactly on a vertex: the edges through it meet the ray at its origin
+    # (zero edge functions, settled exactly). Through the centre it next meets the antipodal
+    # vertex (an icosphere is centrally symmetric) at t = 2; outwards, nothing; with tmin = 0
+    # both meet a triangle of the vertex at t = 0.
+    mesh = pv.Icosphere(radius=1.0, nsub=3).translate((offset, offset, offset))
+    scene = vrc.Scene(mesh)
+    points = np.asarray(mesh.points)
+    centre = np.full(3, offset)
+    out = points - centre
+    faces = mesh.faces.reshape(-1, 4)[:, 1:]
+    through = scene.intersect(points, -out, tmin=1e-9)
+    np.testing.assert_allclose(through["t"], 2.0, atol=1e-9)
+    antipode = np.argmin(np.linalg.norm(points[:, None] + points[None] - 2 * centre, axis=2), axis=1)
+    assert (faces[through["triangle_id"]] == antipode[:, None]).any(axis=1).all()
+    assert scene.occluded(points, -out, tmin=1e-9).all()
+    assert not scene.occluded(points, out, tmin=1e-9).any()
+    assert (scene.intersect(points, out, tmin=1e-9)["triangle_id"] == -1).all()
+    for direction in (out, -out):
+        at_origin = scene.intersect(points, direction)
+        assert (at_origin["t"] == 0).all()
+        assert (faces[at_origin["triangle_id"]] == np.arange(len(points))[:, None]).any(axis=1).all()
