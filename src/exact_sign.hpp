@@ -71,19 +71,8 @@ inline Short difference(double a, double b) {
     return s;
 }
 
-/// Whether a column is exactly the zero vector (its expansions' terms all zero).
-inline bool is_zero(const Short c[3]) {
-    for (int k = 0; k < 3; ++k)
-        for (int r = 0; r < c[k].n; ++r)
-            if (c[k].v[r] != 0) return false;
-    return true;
-}
-
 /// Exact sign of the 3x3 determinant whose columns are given as short expansions.
 inline int det3_sign(const Short c0[3], const Short c1[3], const Short c2[3]) {
-    // A ray leaving a vertex meets the two edges through it in a zero column: the
-    // expansions below would take hundreds of cycles to sum zeros.
-    if (is_zero(c0) || is_zero(c1) || is_zero(c2)) return 0;
     static constexpr int perm[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
     double total[256], sum[256];
     int n_total = 0;
@@ -119,9 +108,14 @@ inline int det3_sign(const Short c0[3], const Short c1[3], const Short c2[3]) {
     return (top > 0) - (top < 0);
 }
 
+/// Whether points p and q are the same point.
+inline bool same(const double* p, const double* q) { return p[0] == q[0] && p[1] == q[1] && p[2] == q[2]; }
+
 /// Sign (-1, 0, +1) of det[C, B, d] with C = c - o, B = b - o: the side of the plane
-/// through the ray and an edge, computed exactly.
+/// through the ray and an edge, computed exactly. A ray leaving a vertex meets the two
+/// edges through it so, in a zero column: no expansions for that.
 inline int orientation(const double* c, const double* b, const double* o, const double* d) {
+    if (same(c, o) || same(b, o)) return 0;
     Short cc[3], bb[3], dd[3];
     for (int k = 0; k < 3; ++k) {
         cc[k] = difference(c[k], o[k]);
@@ -134,6 +128,7 @@ inline int orientation(const double* c, const double* b, const double* o, const 
 /// Sign of det[A, B, C] with A = a - o, ...: the side of the triangle's plane the point o
 /// lies on (Shewchuk's orient3d), computed exactly.
 inline int volume(const double* a, const double* b, const double* c, const double* o) {
+    if (same(a, o) || same(b, o) || same(c, o)) return 0;
     Short aa[3], bb[3], cc[3];
     for (int k = 0; k < 3; ++k) {
         aa[k] = difference(a[k], o[k]);
