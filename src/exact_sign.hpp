@@ -68,6 +68,7 @@ inline Short difference(double a, double b) {
     Short s{};
     two_diff(a, b, s.v[1], s.v[0]);
     s.n = 2;
+    if (s.v[0] == 0) s.v[0] = s.v[1], s.n = 1;  // exact in double (nearby points: Sterbenz): half the terms
     return s;
 }
 
