@@ -537,6 +537,20 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         "Writes rows `rows` of each source array into its output (a row per index, the source's row size and "
         "type), on several threads.");
     m.def(
+        "orientation_signs",
+        [](Points c, Points b, Points o, Points d) {
+            const std::size_t n = c.shape(0);
+            if (b.shape(0) != n || o.shape(0) != n || d.shape(0) != n)
+                throw std::invalid_argument("orientation_signs needs four arrays of the same length");
+            auto* out = new int8_t[n];
+            for (std::size_t i = 0; i < n; ++i)
+                out[i] = int8_t(vrc::exact::orientation(c.data() + 3 * i, b.data() + 3 * i, o.data() + 3 * i, d.data() + 3 * i));
+            return owned_array(out, n, 1);
+        },
+        "c"_a, "b"_a, "o"_a, "d"_a,
+        "Per row, the exact sign of det[c - o, b - o, d]: the orientation every kernel settles near-zero edge "
+        "functions with (for tests against exact rational arithmetic).");
+    m.def(
         "cpu_supports_avx2",
         [] { return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"); },
         "Whether this CPU runs the AVX2 build of the core (AVX2 and FMA).");

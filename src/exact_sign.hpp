@@ -72,8 +72,116 @@ inline Short difference(double a, double b) {
     return s;
 }
 
-/// Exact sign of the 3x3 determinant whose columns are given as short expansions.
+/// Whether two columns hold the same values term for term.
+inline bool equal(const Short a[3], const Short b[3]) {
+    for (int k = 0; k < 3; ++k) {
+        if (a[k].n != b[k].n) return false;
+        for (int r = 0; r < a[k].n; ++r)
+            if (a[k].v[r] != b[k].v[r]) return false;
+    }
+    return true;
+}
+
+/// Whether a column's entries are single doubles (exact differences).
+inline bool single(const Short c[3]) { return c[0].n == 1 && c[1].n == 1 && c[2].n == 1; }
+struct Singles {};
+constexpr Singles kSingles{};
+
+/// The exact sign of a determinant of single doubles: its six products are 24 doubles
+/// exactly (a b = x + y, then x c and y c), summed exactly into a nonoverlapping expansion
+/// by Shewchuk's Grow-Expansion with zeros dropped (the sum of a determinant that is
+/// exactly zero, a ray along a mesh's collinear edges, keeps it short); its largest term
+/// has the sum's sign.
+inline int det3_sign(const Short c0[3], const Short c1[3], const Short c2[3], Singles) {
+    static constexpr int perm[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
+    double e[24];
+    int m = 0;
+    const auto grow = [&](double q) {
+        int k = 0;
+        for (int i = 0; i < m; ++i) {
+            double sum, h;
+            two_sum(q, e[i], sum, h);
+            q = sum;
+            if (h != 0) e[k++] = h;
+        }
+        if (q != 0) e[k++] = q;
+        m = k;
+    };
+    for (int p = 0; p < 6; ++p) {
+        const double a = c0[perm[p][0]].v[0], b = c1[perm[p][1]].v[0];
+        const double c = p < 3 ? c2[perm[p][2]].v[0] : -c2[perm[p][2]].v[0];
+        double x, y, x1, x0, y1, y0;
+        two_product(a, b, x, y);
+        two_product(x, c, x1, x0);
+        two_product(y, c, y1, y0);
+        grow(y0), grow(x0), grow(y1), grow(x1);
+    }
+    return m == 0 ? 0 : (e[m - 1] > 0) - (e[m - 1] < 0);
+}
+
+/// A double-double value hi + lo, |lo| <= ulp(hi) / 2 (as two_sum and two_product leave it).
+struct Twofold {
+    double hi, lo;
+};
+inline Twofold twofold(const Short& s) { return s.n == 2 ? Twofold{s.v[1], s.v[0]} : Twofold{s.v[0], 0.0}; }
+/// Sum, relative error below 3u^2 / (1 - 4u) (u = 2^-53; Joldes, Muller and Popescu,
+/// "Tight and rigorous error bounds for basic building blocks of double-word arithmetic",
+/// ACM TOMS 44, 2017: AccurateDWPlusDW).
+inline Twofold add(Twofold x, Twofold y) {
+    double sh, sl, th, tl, vh, vl, zh, zl;
+    two_sum(x.hi, y.hi, sh, sl);
+    two_sum(x.lo, y.lo, th, tl);
+    two_sum(sh, sl + th, vh, vl);
+    two_sum(vh, tl + vl, zh, zl);
+    return {zh, zl};
+}
+/// Product with an FMA, relative error below 5u^2 (ibid., DWTimesDW3, bounded 4u^2 there).
+inline Twofold mul(Twofold x, Twofold y) {
+    double ch, cl;
+    two_product(x.hi, y.hi, ch, cl);
+    const double t = std::fma(x.lo, y.hi, std::fma(x.hi, y.lo, x.lo * y.lo));
+    double zh, zl;
+    two_sum(ch, cl + t, zh, zl);
+    return {zh, zl};
+}
+
+/// The sign of the 3x3 determinant whose columns are c0, c1, c2 (exact as double-doubles)
+/// from double-double arithmetic: det = sum over k of c2[k] (c0[i] c1[j] - c0[j] c1[i]).
+/// Each cofactor carries at most 5u^2 + 3u^2 of its permanent |c0[i] c1[j]| +
+/// |c0[j] c1[i]|, its product with c2[k] 5u^2 more, and the two sums 3u^2 each of the
+/// whole permanent P: below 17u^2 P with the second-order terms, so 32u^2 P (P from the
+/// heads, whose own roundings are far smaller) leaves a wide margin. 0 when |det| is
+/// within that (then the expansions decide), or when P leaves the range where products
+/// and their errors are normal doubles.
+inline int twofold_det3_sign(const Twofold c0[3], const Twofold c1[3], const Twofold c2[3]) {
+    Twofold det{0.0, 0.0};
+    double permanent = 0;
+    for (int k = 0; k < 3; ++k) {
+        const int i = (k + 1) % 3, j = (k + 2) % 3;
+        const Twofold a = mul(c0[i], c1[j]), b = mul(c0[j], c1[i]);
+        const Twofold cofactor = add(a, Twofold{-b.hi, -b.lo});
+        det = add(det, mul(c2[k], cofactor));
+        permanent += std::fabs(c2[k].hi) * (std::fabs(c0[i].hi * c1[j].hi) + std::fabs(c0[j].hi * c1[i].hi));
+    }
+    constexpr double kBound = 32 * 0x1p-106;
+    if (!(permanent > 0x1p-800 && permanent < 0x1p800)) return 0;
+    const double value = det.hi + det.lo;
+    if (std::fabs(value) > kBound * permanent * 1.01) return (value > 0) - (value < 0);
+    return 0;
+}
+
+/// Exact sign of the 3x3 determinant whose columns are given as short expansions: from
+/// double-double arithmetic when that tells it (nearly always: a kernel asks only when its
+/// own double-precision value is within its rounding of zero), else from expansions.
 inline int det3_sign(const Short c0[3], const Short c1[3], const Short c2[3]) {
+    // two equal columns: a ray aimed exactly at a point (its direction the point less the
+    // origin, exactly) meets the edges through that point so
+    if (equal(c0, c1) || equal(c1, c2) || equal(c0, c2)) return 0;
+    const Twofold t0[3] = {twofold(c0[0]), twofold(c0[1]), twofold(c0[2])};
+    const Twofold t1[3] = {twofold(c1[0]), twofold(c1[1]), twofold(c1[2])};
+    const Twofold t2[3] = {twofold(c2[0]), twofold(c2[1]), twofold(c2[2])};
+    if (const int sign = twofold_det3_sign(t0, t1, t2)) return sign;
+    if (single(c0) && single(c1) && single(c2)) return det3_sign(c0, c1, c2, kSingles);
     static constexpr int perm[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
     double total[256], sum[256];
     int n_total = 0;

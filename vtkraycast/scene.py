@@ -31,7 +31,7 @@ from .mesh import PreparedMesh, prepare_mesh
 from .parallel import Workspace, cast_on_node, communicator, composite, default_threads, node_frames, triangle_keys
 from .sensors import Lidar, Panorama
 from .shared_frames import free_shared_bytes, segment_bytes
-from .visibility import CROSSING_ARRAYS, crossing_arrays, layered_arrays, visible_points
+from .visibility import CROSSING_ARRAYS, crossing_arrays, ids_present, layered_arrays, visible_points
 
 __all__ = ["PRECISIONS", "STRATEGIES", "Scene"]
 
@@ -445,7 +445,7 @@ class Scene:
         camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
         image = self.cast(camera, arrays=["CellId"], threads=threads)
         cells = np.asarray(image["CellId"])
-        return np.unique(cells[cells >= 0])
+        return ids_present(cells)
 
     def visible_points(
         self, camera: Camera | Any, *, tolerance: float = 1e-6, threads: int | None = None
@@ -485,7 +485,7 @@ class Scene:
         camera = camera if isinstance(camera, Camera) else Camera.from_vtk(camera)
         image = self.cast(camera, arrays=["TriangleId"], threads=threads)
         triangles = np.asarray(image["TriangleId"])
-        surface_cells = np.unique(self._mesh.surface_cell_ids[triangles[triangles >= 0]])
+        surface_cells = ids_present(self._mesh.surface_cell_ids[triangles[triangles >= 0]])
         return pv.wrap(self._mesh.surface).extract_cells(surface_cells)
 
     def _cast_parallel(

@@ -14,7 +14,18 @@ if TYPE_CHECKING:
     from .camera import Camera
     from .scene import Scene
 
-__all__ = ["crossing_arrays", "layered_arrays", "visible_points"]
+__all__ = ["crossing_arrays", "ids_present", "layered_arrays", "visible_points"]
+
+
+def ids_present(ids: np.ndarray) -> np.ndarray:
+    """The distinct non-negative values of ``ids`` (negative ones ignored), sorted, as
+    int64: a mark per possible id, not np.unique's sort or hash (a frame's or a mesh's
+    millions of ids against a mesh's points or cells)."""
+    ids = ids[ids >= 0]
+    marked = np.zeros(int(ids.max()) + 1 if ids.size else 0, dtype=bool)
+    marked[ids] = True
+    return np.flatnonzero(marked)
+
 
 #: Arrays computed from every crossing along the pixel ray, asked for by name.
 CROSSING_ARRAYS = ("HitCount", "Thickness")
@@ -88,7 +99,7 @@ def visible_points(scene: Scene, camera: Camera, tolerance: float, threads: int 
     view, in [near, far], and nothing in front of them closer than ``1 - tolerance`` of the
     way from the eye."""
     points = scene.prepared.points
-    used = np.unique(scene.prepared.triangles)
+    used = ids_present(scene.prepared.triangles.ravel())
     p = points[used]
     offset = p - camera.eye
     along = offset @ -camera.backward  # depth in front of the eye
