@@ -325,7 +325,7 @@ class ProjectedScene {
     /// centres lie in the image's part of the cone from the eye over the triangle. In the
     /// homogeneous pixel coordinates h = (column, row, 1) depth of a point relative to the
     /// eye (PixelMap: a linear map), a ray through pixel (c, r) hits the triangle ABC only
-    /// if (c, r, 1) = a h_A + b h_B + c h_C with a, b, c >= 0, i.e. the edge functions
+    /// if (c, r, 1) = x h_A + y h_B + z h_C with x, y, z >= 0, i.e. the edge functions
     /// (h_A x h_B) . (c, r, 1) and the other two all have the sign of det[h_A, h_B, h_C]
     /// (2D homogeneous rasterisation, Olano and Greer, "Triangle scan conversion using 2D
     /// homogeneous coordinates", Graphics Hardware 1997: no division by a depth, so points
