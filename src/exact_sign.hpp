@@ -4,7 +4,10 @@
 // kernel's own evaluation is too close to zero for its sign to be trusted.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 
 namespace vrc {
 namespace exact {
@@ -86,6 +89,54 @@ inline bool equal(const Short a[3], const Short b[3]) {
 inline bool single(const Short c[3]) { return c[0].n == 1 && c[1].n == 1 && c[2].n == 1; }
 struct Singles {};
 constexpr Singles kSingles{};
+
+/// A column of single doubles as integers times one power of two, when they fit: each
+/// entry's significant bits lie within 61 bits of the column's lowest (no subnormals).
+/// Scaling a column by a power of two keeps the determinant's sign.
+inline bool to_integers(const Short c[3], int64_t out[3]) {
+    int lowest = INT32_MAX, highest = INT32_MIN, low[3] = {0, 0, 0};
+    uint64_t mantissa[3] = {0, 0, 0};
+    for (int k = 0; k < 3; ++k) {
+        uint64_t bits;
+        std::memcpy(&bits, &c[k].v[0], sizeof bits);
+        const int exponent = int(bits >> 52 & 0x7ff);
+        if (exponent == 0) {
+            if ((bits << 1) != 0) return false;  // subnormal
+            continue;                            // zero
+        }
+        const uint64_t m = (bits & ((uint64_t(1) << 52) - 1)) | (uint64_t(1) << 52);
+        const int zeros = __builtin_ctzll(m);
+        mantissa[k] = m >> zeros;
+        low[k] = exponent - 1075 + zeros;  // value = mantissa 2^low
+        lowest = std::min(lowest, low[k]);
+        highest = std::max(highest, exponent - 1023);  // value < 2^(highest + 1)
+    }
+    if (lowest == INT32_MAX) return (out[0] = out[1] = out[2] = 0), true;
+    if (highest - lowest + 1 > 61) return false;
+    for (int k = 0; k < 3; ++k) {
+        const int64_t v = mantissa[k] == 0 ? 0 : int64_t(mantissa[k] << (low[k] - lowest));
+        out[k] = c[k].v[0] < 0 ? -v : v;
+    }
+    return true;
+}
+
+/// The exact sign of a determinant of columns of integers below 2^61: each cofactor
+/// a_i b_j - a_j b_i fits 128 bits, and sum over k of c_k X_k is split as
+/// (sum c_k hi(X_k)) 2^64 + sum c_k lo(X_k), both sums within 128 bits.
+inline int det3_sign(const int64_t a[3], const int64_t b[3], const int64_t c[3]) {
+    __int128 high = 0, low = 0;
+    for (int k = 0; k < 3; ++k) {
+        const int i = (k + 1) % 3, j = (k + 2) % 3;
+        const __int128 cofactor = __int128(a[i]) * b[j] - __int128(a[j]) * b[i];
+        const int64_t cofactor_high = int64_t(cofactor >> 64);                 // floor
+        const uint64_t cofactor_low = uint64_t(cofactor & ~uint64_t(0));       // cofactor - high 2^64
+        high += __int128(c[k]) * cofactor_high;
+        low += __int128(c[k]) * __int128(cofactor_low);
+    }
+    high += low >> 64;  // floor: low = (low >> 64) 2^64 + its last 64 bits, in [0, 2^64)
+    if (high != 0) return high > 0 ? 1 : -1;
+    return uint64_t(low & ~uint64_t(0)) != 0 ? 1 : 0;
+}
 
 /// The exact sign of a determinant of single doubles: its six products are 24 doubles
 /// exactly (a b = x + y, then x c and y c), summed exactly into a nonoverlapping expansion
@@ -181,7 +232,11 @@ inline int det3_sign(const Short c0[3], const Short c1[3], const Short c2[3]) {
     const Twofold t1[3] = {twofold(c1[0]), twofold(c1[1]), twofold(c1[2])};
     const Twofold t2[3] = {twofold(c2[0]), twofold(c2[1]), twofold(c2[2])};
     if (const int sign = twofold_det3_sign(t0, t1, t2)) return sign;
-    if (single(c0) && single(c1) && single(c2)) return det3_sign(c0, c1, c2, kSingles);
+    if (single(c0) && single(c1) && single(c2)) {
+        int64_t i0[3], i1[3], i2[3];
+        if (to_integers(c0, i0) && to_integers(c1, i1) && to_integers(c2, i2)) return det3_sign(i0, i1, i2);
+        return det3_sign(c0, c1, c2, kSingles);
+    }
     static constexpr int perm[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
     double total[256], sum[256];
     int n_total = 0;

@@ -78,9 +78,10 @@ def test_segments_to_every_vertex_of_a_lattice_box(offset):
 
 def test_orientation_signs_against_rational_arithmetic():
     # The predicate every kernel settles near-zero edge functions with, det[c - o, b - o, d],
-    # on exactly zero, nearly zero (1e-16 and 1e-32 of its terms: the double-double stage
-    # and the expansions) and generic cases, at offsets 0 and 1e5, against fractions. (No
-    # subnormal entries: their products underflow, which no double arithmetic survives.)
+    # on exactly zero, nearly zero (1e-16 and 1e-32 of its terms: the double-double stage,
+    # then integers or expansions) and generic cases, at offsets 0 and 1e5, against
+    # fractions. (No subnormal entries: their products underflow, which no double
+    # arithmetic survives.)
     from fractions import Fraction
 
     from vtkraycast import _core
@@ -103,6 +104,9 @@ def test_orientation_signs_against_rational_arithmetic():
             (o + v, np.nextafter(b, b + nudge), o, np.nextafter(v, v + np.roll(nudge, 1, axis=1))),  # about 1e-32
             (o + rng.normal(size=(n, 3)), o + rng.normal(size=(n, 3)), o, rng.normal(size=(n, 3))),
         ]
+    # columns whose entries span more than 61 bits (1e6 beside full 53-bit fractions): zero
+    wide = np.column_stack((rng.integers(1, 9, n) * 1e6, 1 + rng.integers(1, 2**40, n) * 2.0**-52, np.full(n, 0.5)))
+    rows.append((wide, 2 * wide, np.zeros((n, 3)), rng.normal(size=(n, 3))))
     c, b, o, d = (np.concatenate(part) for part in zip(*rows))
 
     def exact_sign(ci, bi, oi, di):
