@@ -28,6 +28,15 @@ namespace vrc {
 #endif
 }
 
+/// Asks the cache for every line of the `bytes` (> 0) from p: a block that is not aligned
+/// to lines (a leaf's 104 bytes, eight triangles' 96 bytes of point indices) may span one
+/// line more than its size suggests.
+[[gnu::always_inline]] inline void prefetch_range(const void* p, std::size_t bytes) {
+    const std::uintptr_t first = reinterpret_cast<std::uintptr_t>(p) & ~std::uintptr_t(63);
+    const std::uintptr_t last = (reinterpret_cast<std::uintptr_t>(p) + bytes - 1) & ~std::uintptr_t(63);
+    for (std::uintptr_t line = first; line <= last; line += 64) prefetch_line(reinterpret_cast<const void*>(line));
+}
+
 /// Asks for transparent huge pages over a buffer of 4 MiB or more (its whole 4 KiB pages),
 /// before its pages are first touched. Linux only; elsewhere a no-op.
 inline void advise_huge(void* data, std::size_t bytes) {

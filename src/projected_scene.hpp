@@ -604,10 +604,7 @@ class ProjectedScene {
     }
     /// Asks the cache for leaf n's triangles (their points' indices), every line of them.
     void prefetch_triangles(const ProjectedNode& n) const {
-        const auto line = [](const void* p) { return reinterpret_cast<std::uintptr_t>(p) & ~std::uintptr_t(63); };
-        const uint32_t* first = scene_.triangles.data() + 3 * std::size_t(n.index);
-        for (std::uintptr_t p = line(first), end = line(first + 3 * n.count - 1); p <= end; p += 64)
-            prefetch_line(reinterpret_cast<const void*>(p));
+        prefetch_range(scene_.triangles.data() + 3 * std::size_t(n.index), 12 * std::size_t(n.count));
     }
     /// Asks the cache for the projected points of triangles first to first + count - 1.
     void prefetch_points(uint32_t first, uint32_t count) const {

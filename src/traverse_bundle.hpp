@@ -425,8 +425,7 @@ class BundleTracer {
                     for (int line = 0; line < 4; ++line) prefetch_line(next + 64 * line);
                 } else {  // a leaf's block (its point indices and points follow when it is popped)
                     const char* block = reinterpret_cast<const char*>(&scene_.leaf(node.child[c]));
-                    prefetch_line(block);
-                    prefetch_line(block + LeafBlock::bytes(leaf_size(node.count[c])) - 1);
+                    prefetch_range(block, LeafBlock::bytes(leaf_size(node.count[c])));
                 }
                 stack[top++] = {node.child[c], node.count[c], extent[0][c], nearest[c], rects[c]};
             }

@@ -367,8 +367,7 @@ class WideSearch {
             // (an address as an integer: past the array where the hint is wrong)
             const uintptr_t indices = reinterpret_cast<uintptr_t>(scene_.triangles.data()) +
                                       12 * std::size_t(leaf_first_hint(next.count));
-            prefetch_line(reinterpret_cast<const char*>(indices));
-            prefetch_line(reinterpret_cast<const char*>(indices + 12 * leaf_size(next.count) - 1));
+            prefetch_range(reinterpret_cast<const char*>(indices), 12 * std::size_t(leaf_size(next.count)));
             return After::step;
         } else {
             return leaf(next.child, leaf_size(next.count)) ? After::stop : After::pop;
