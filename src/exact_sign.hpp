@@ -87,8 +87,6 @@ inline bool equal(const Short a[3], const Short b[3]) {
 
 /// Whether a column's entries are single doubles (exact differences).
 inline bool single(const Short c[3]) { return c[0].n == 1 && c[1].n == 1 && c[2].n == 1; }
-struct Singles {};
-constexpr Singles kSingles{};
 
 /// A column of single doubles as integers times one power of two, when they fit: each
 /// entry's significant bits lie within 61 bits of the column's lowest (no subnormals).
@@ -138,12 +136,11 @@ inline int det3_sign(const int64_t a[3], const int64_t b[3], const int64_t c[3])
     return uint64_t(low & ~uint64_t(0)) != 0 ? 1 : 0;
 }
 
-/// The exact sign of a determinant of single doubles: its six products are 24 doubles
-/// exactly (a b = x + y, then x c and y c), summed exactly into a nonoverlapping expansion
-/// by Shewchuk's Grow-Expansion with zeros dropped (the sum of a determinant that is
-/// exactly zero, a ray along a mesh's collinear edges, keeps it short); its largest term
-/// has the sum's sign.
-inline int det3_sign(const Short c0[3], const Short c1[3], const Short c2[3], Singles) {
+/// The exact sign of a determinant of single doubles whose columns span too many bits for
+/// integers: its six products are 24 doubles exactly (a b = x + y, then x c and y c),
+/// summed exactly into a nonoverlapping expansion by Shewchuk's Grow-Expansion with zeros
+/// dropped (an exact zero keeps it short); its largest term has the sum's sign.
+inline int singles_det3_sign(const Short c0[3], const Short c1[3], const Short c2[3]) {
     static constexpr int perm[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
     double e[24];
     int m = 0;
@@ -235,7 +232,7 @@ inline int det3_sign(const Short c0[3], const Short c1[3], const Short c2[3]) {
     if (single(c0) && single(c1) && single(c2)) {
         int64_t i0[3], i1[3], i2[3];
         if (to_integers(c0, i0) && to_integers(c1, i1) && to_integers(c2, i2)) return det3_sign(i0, i1, i2);
-        return det3_sign(c0, c1, c2, kSingles);
+        return singles_det3_sign(c0, c1, c2);
     }
     static constexpr int perm[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
     double total[256], sum[256];

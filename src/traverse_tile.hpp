@@ -40,7 +40,6 @@ struct PixelRect {
 template <template <class> class KernelT, class Real>
 class TileTracer {
     using Kernel = KernelT<Real>;
-    static constexpr double kEps = std::numeric_limits<double>::epsilon();
 
    public:
     /// `by_triangle`: the cast asks only for what the hit triangle decides, not the hit's
