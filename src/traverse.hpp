@@ -91,7 +91,13 @@ inline void test_triangle(const Kernel& kernel, const Scene& scene, uint32_t i, 
     if (closer || t < hit.t) bound = std::min(bound, t + kTieTolerance<Real> * std::fabs(t));
     hit.t = t;
     hit.prim = i;
-    for (int c = 0; c < 3; ++c) hit.b[c] = b[c];
+    // One weight at a time: the kernel stores them one by one, and a wider read across
+    // two of those stores (the vectorizer's) waits until both reach the cache.
+    for (int c = 0; c < 3; ++c) {
+        Real weight = b[c];
+        asm("" : "+x"(weight));  // (keeps it a read of its own)
+        hit.b[c] = weight;
+    }
 }
 
 /// What a traversal looks for: the closest hit (ties to the lowest input triangle index),
