@@ -105,6 +105,11 @@ class BundleTracer {
         [[nodiscard]] bool holds(double a, double b) const { return a >= a0 && a <= a1 && b >= b0 && b <= b1; }
         [[nodiscard]] bool meets(const Rect& o) const { return a0 <= o.a1 && o.a0 <= a1 && b0 <= o.b1 && o.b0 <= b1; }
     };
+    /// A node's lanes projected (project): their rectangles' sides and least distances.
+    struct ProjectedLanes {
+        alignas(32) double a0[WideNode::kWidth], a1[WideNode::kWidth], b0[WideNode::kWidth], b1[WideNode::kWidth];
+        alignas(32) double nearest[WideNode::kWidth];
+    };
 
    public:
     BundleTracer(const Scene& scene, const SweepRays& rays, const CastContext& context)
@@ -347,26 +352,35 @@ class BundleTracer {
         return false;
     }
 
-    /// The projection of box lane `c` (its least and most along c, p, q in `extent`) onto
-    /// the plane w = 1, and its least distance w along c. The rays meet only points with
-    /// w >= 0: a box wholly behind gives an empty rectangle; one reaching across w = 0
-    /// bounds a = u / w only on the sides where u keeps its sign.
-    Rect project(const float extent[6][WideNode::kWidth], int c, double& nearest) const {
-        const double w0 = axes_[0].low(extent[0][c]), w1 = axes_[0].high(extent[1][c]);
-        nearest = w0;
-        if (w1 < 0) return Rect{};
-        const double u0 = axes_[1].low(extent[2][c]), u1 = axes_[1].high(extent[3][c]);
-        const double v0 = axes_[2].low(extent[4][c]), v1 = axes_[2].high(extent[5][c]);
+    /// The projections of box lanes `first` to `first + 3` (their least and most along c,
+    /// p, q in `extent`) onto the plane w = 1, as rectangles' sides, and their least
+    /// distances w along c; as bits, the lanes whose rectangle meets the bundle's. The rays
+    /// meet only points with w >= 0: a box wholly behind meets nothing; one reaching across
+    /// w = 0 bounds a = u / w only on the sides where u keeps its sign.
+    unsigned project(const float extent[6][WideNode::kWidth], int first, ProjectedLanes& out) const {
+        const auto side = [&](int row, const LaneAxis& axis, double shift) {
+            Double4 x;
+            for (int k = 0; k < 4; ++k) x[k] = double(extent[row][first + k]);
+            return x - axis.n_o + shift;
+        };
+        const Double4 w0 = side(0, axes_[0], -axes_[0].slack), w1 = side(1, axes_[0], axes_[0].slack);
+        const Double4 u0 = side(2, axes_[1], -axes_[1].slack), u1 = side(3, axes_[1], axes_[1].slack);
+        const Double4 v0 = side(4, axes_[2], -axes_[2].slack), v1 = side(5, axes_[2], axes_[2].slack);
         // u / w over the box lies between these quotients; 1e-12 covers their rounding
         // (two, with the reciprocals: relative 2^-52, where the rays' projections lie, below 9).
-        const double s = 1e-12, r1 = 1 / w1;
-        if (w0 > 0) {
-            const double r0 = 1 / w0;
-            return Rect{std::min(u0 * r0, u0 * r1) - s, std::max(u1 * r0, u1 * r1) + s,
-                        std::min(v0 * r0, v0 * r1) - s, std::max(v1 * r0, v1 * r1) + s};
-        }
-        return Rect{u0 > 0 ? u0 * r1 - s : -HUGE_VAL, u1 < 0 ? u1 * r1 + s : HUGE_VAL, v0 > 0 ? v0 * r1 - s : -HUGE_VAL,
-                    v1 < 0 ? v1 * r1 + s : HUGE_VAL};
+        const double s = 1e-12;
+        const Double4 r0 = 1 / w0, r1 = 1 / w1, inf = Double4{} + HUGE_VAL;
+        const auto least = [](Double4 x, Double4 y) { return x < y ? x : y; };
+        const auto most = [](Double4 x, Double4 y) { return x > y ? x : y; };
+        const Mask4 front = w0 > 0;  // (elsewhere r0 is not used)
+        const Double4 a0 = front ? least(u0 * r0, u0 * r1) - s : (u0 > 0 ? u0 * r1 - s : -inf);
+        const Double4 a1 = front ? most(u1 * r0, u1 * r1) + s : (u1 < 0 ? u1 * r1 + s : inf);
+        const Double4 b0 = front ? least(v0 * r0, v0 * r1) - s : (v0 > 0 ? v0 * r1 - s : -inf);
+        const Double4 b1 = front ? most(v1 * r0, v1 * r1) + s : (v1 < 0 ? v1 * r1 + s : inf);
+        std::memcpy(out.a0 + first, &a0, sizeof a0), std::memcpy(out.a1 + first, &a1, sizeof a1);
+        std::memcpy(out.b0 + first, &b0, sizeof b0), std::memcpy(out.b1 + first, &b1, sizeof b1);
+        std::memcpy(out.nearest + first, &w0, sizeof w0);
+        return lane_bits((w1 >= 0) & (a0 <= all_.a1) & (a1 >= all_.a0) & (b0 <= all_.b1) & (b1 >= all_.b0)) << first;
     }
 
     /// False, with the tile unfinished, once it has taken more than `budget` nodes and
@@ -408,12 +422,13 @@ class BundleTracer {
                 lanes_store(extent[2 * i + 1], axes_[i].at(node, axes_[i].most_row));
             }
             int order[WideNode::kWidth], n = 0;
+            ProjectedLanes lanes;
+            mask &= project(extent, 0, lanes) | project(extent, 4, lanes);
             Rect rects[WideNode::kWidth];
-            double nearest[WideNode::kWidth];
             for (; mask; mask &= mask - 1) {  // farthest first, so the nearest is popped first
                 const int c = __builtin_ctz(mask);
-                rects[c] = project(extent, c, nearest[c]);
-                if (!any_block_meets(rects[c], nearest[c])) continue;
+                rects[c] = Rect{lanes.a0[c], lanes.a1[c], lanes.b0[c], lanes.b1[c]};
+                if (!any_block_meets(rects[c], lanes.nearest[c])) continue;
                 int at = n++;
                 for (; at > 0 && extent[0][order[at - 1]] < extent[0][c]; --at) order[at] = order[at - 1];
                 order[at] = c;
@@ -427,7 +442,7 @@ class BundleTracer {
                     const char* block = reinterpret_cast<const char*>(&scene_.leaf(node.child[c]));
                     prefetch_range(block, LeafBlock::bytes(leaf_size(node.count[c])));
                 }
-                stack[top++] = {node.child[c], node.count[c], extent[0][c], nearest[c], rects[c]};
+                stack[top++] = {node.child[c], node.count[c], extent[0][c], lanes.nearest[c], rects[c]};
             }
         }
         return true;
