@@ -320,23 +320,22 @@ class BundleTracer {
         far_ = *std::max_element(block_far_, block_far_ + n_blocks_);
         far_limit_ = std::isinf(far_) ? HUGE_VALF : round_up(far_ + axes_[0].n_o + axes_[0].slack);
     }
-    /// After rays of a leaf's candidates came closer (`changed_`): their blocks' far bounds,
-    /// each once, then the bundle's, when one of those blocks held it (bounds only shrink).
-    void update_blocks(int n) {
-        int blocks[kMaxRays], n_blocks = 0;
-        for (int c = 0; c < n; ++c) {
-            const int j = candidates_[c];
-            if (!changed_[j]) continue;
-            changed_[j] = false;
-            if (!block_changed_[block_of_[j]]) block_changed_[blocks[n_blocks++] = block_of_[j]] = true;
-        }
+    /// Ray j came closer: its block's far bound is to be found again (update_blocks).
+    void came_closer(int j) {
+        const int b = block_of_[j];
+        if (!block_changed_[b]) block_changed_[b] = true, changed_blocks_[n_changed_++] = b;
+    }
+    /// After rays of a leaf came closer: their blocks' far bounds, each once, then the
+    /// bundle's, when one of those blocks held it (bounds only shrink).
+    void update_blocks() {
         bool held = false;
-        for (int i = 0; i < n_blocks; ++i) {
-            const int b = blocks[i];
+        for (int i = 0; i < n_changed_; ++i) {
+            const int b = changed_blocks_[i];
             block_changed_[b] = false;
             held |= block_far_[b] >= far_;
             block_far_[b] = search_far(b);
         }
+        n_changed_ = 0;
         if (held) set_far();
     }
 
@@ -390,7 +389,6 @@ class BundleTracer {
     static constexpr int kVisitsPerRay = 4;
     bool traverse(double budget) {
         for (int j = 0; j < n_; ++j) kernel_[j].reset(), filter_[j].reset();
-        std::fill_n(changed_, n_, false);
         int visits = 0;
         struct Pending {
             uint32_t child, count;
@@ -483,7 +481,7 @@ class BundleTracer {
             by_triangle(first, count, n);
         else
             by_ray(index, first, count, n);
-        update_blocks(n);
+        update_blocks();
     }
 
     /// A triangle's projection (its points' (a, b), all in front): a ray whose projection
@@ -578,7 +576,7 @@ class BundleTracer {
                     if (bound_[j] * w_[j] < nearest) continue;
                     const double before = bound_[j];
                     test_triangle(kernel(j), scene_, i, ray_[j].tmin, bound_[j], hit_[j]);
-                    changed_[j] |= bound_[j] != before;
+                    if (bound_[j] != before) came_closer(j);
                 }
             }
         }
@@ -593,7 +591,7 @@ class BundleTracer {
             const double before = bound_[j], tmin = ray_[j].tmin;
             for (unsigned m = filter_[j]->candidates(scene_.leaf(index), count, bound_[j]); m; m &= m - 1)
                 test_triangle(*kernel_[j], scene_, first + __builtin_ctz(m), tmin, bound_[j], hit_[j]);
-            changed_[j] |= bound_[j] != before;
+            if (bound_[j] != before) came_closer(j);
         }
     }
 
@@ -620,8 +618,8 @@ class BundleTracer {
     Ray ray_[kMaxRays];
     std::optional<Kernel> kernel_[kMaxRays];
     std::optional<TriangleFilter> filter_[kMaxRays];
-    bool changed_[kMaxRays];  ///< whether ray j's bound came closer in the leaf
-    bool block_changed_[kMaxRays] = {};  ///< (update_blocks' own)
+    bool block_changed_[kMaxRays] = {};  ///< the blocks of rays that came closer in a leaf (came_closer)
+    int changed_blocks_[kMaxRays], n_changed_ = 0;
     int candidates_[kMaxRays];  ///< the rays a leaf is tested on, and their projections
     double candidate_a_[kMaxRays + 3], candidate_b_[kMaxRays + 3];
     Hit<Real> hit_[kMaxRays];
