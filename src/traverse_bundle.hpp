@@ -219,9 +219,10 @@ class BundleTracer {
     }
 
     /// Finds the bundle's axis c, its cross axes p, q and each ray's projection (a, b) =
-    /// (d.p, d.q) / d.c onto the plane at distance 1 along c, with the rectangles of rows
-    /// and blocks, and the blocks' far bounds. False when some ray turns too far from c for
-    /// the projection (beyond about 80 degrees), or the rays are not a coherent grid.
+    /// (d.p, d.q) / d.c onto the plane at distance 1 along c, with the rectangles of the
+    /// bundle and its blocks, and the blocks' far bounds. False when some ray turns too far
+    /// from c for the projection (beyond about 80 degrees), or the rays are not a coherent
+    /// grid.
     bool enclose() {
         const double* mid = ray_[n_ / 2].dir;
         const double* last = ray_[(n_ / 2 / cols_) * cols_ + cols_ - 1].dir;  // the middle row's last ray
@@ -237,7 +238,6 @@ class BundleTracer {
         cross(c_, p_, q_);
         all_ = Rect{};
         for (int r = 0; r < rows_; ++r) {
-            rows_rect_[r] = Rect{};
             for (int j = r * cols_; j < (r + 1) * cols_; ++j) {
                 const double* d = ray_[j].dir;
                 const double w = w_[j] = dot(d, c_);
@@ -248,10 +248,8 @@ class BundleTracer {
                 if (column % kBlock == 0) blocks_[b] = Rect{}, block_first_[b] = j;
                 block_of_[j] = b;
                 blocks_[b].grow(a_[j], b_[j]);
-                rows_rect_[r].grow(a_[j], b_[j]);
+                all_.grow(a_[j], b_[j]);
             }
-            all_.a0 = std::min(all_.a0, rows_rect_[r].a0), all_.a1 = std::max(all_.a1, rows_rect_[r].a1);
-            all_.b0 = std::min(all_.b0, rows_rect_[r].b0), all_.b1 = std::max(all_.b1, rows_rect_[r].b1);
         }
         // Rays in neighbouring directions cover the tile's rectangle with their blocks'
         // small ones; blocks each spanning much of it (a grid of unrelated directions) would
@@ -263,7 +261,11 @@ class BundleTracer {
         if (blocks_area > 2 * all_.area()) return false;
         const double* axis[3] = {c_, p_, q_};
         for (int i = 0; i < 3; ++i) axes_[i].set(axis[i], origin_, reach_);
-        for (int b = 0; b < n_blocks_; ++b) block_far_[b] = search_far(b);
+        for (int b = 0; b < n_blocks_; ++b) {
+            block_far_[b] = search_far(b);
+            block_a0_[b] = blocks_[b].a0, block_a1_[b] = blocks_[b].a1, block_b0_[b] = blocks_[b].b0, block_b1_[b] = blocks_[b].b1;
+        }
+        for (int b = n_blocks_; b < n_blocks_ + 3; ++b) block_a0_[b] = HUGE_VAL;  // (meets nothing)
         set_far();
         return true;
     }
@@ -339,15 +341,20 @@ class BundleTracer {
         if (held) set_far();
     }
 
-    /// Whether some block's rays may meet a box projecting into `rect` at distances along
-    /// c from `nearest` on.
+    /// Blocks `first` to `first + 3` whose rays may meet a box projecting into `rect` at
+    /// distances along c from `nearest` on, as bits.
+    [[nodiscard]] unsigned blocks_meeting(int first, const Rect& rect, double nearest) const {
+        Double4 a0, a1, b0, b1, far;
+        std::memcpy(&a0, block_a0_ + first, sizeof a0), std::memcpy(&a1, block_a1_ + first, sizeof a1);
+        std::memcpy(&b0, block_b0_ + first, sizeof b0), std::memcpy(&b1, block_b1_ + first, sizeof b1);
+        std::memcpy(&far, block_far_ + first, sizeof far);
+        return lane_bits((a0 <= rect.a1) & (a1 >= rect.a0) & (b0 <= rect.b1) & (b1 >= rect.b0) & (far >= nearest));
+    }
+    /// Whether some block's rays may meet such a box.
     [[nodiscard]] bool any_block_meets(const Rect& rect, double nearest) const {
         if (!rect.meets(all_)) return false;
-        for (int r = 0; r < rows_; ++r) {
-            if (!rows_rect_[r].meets(rect)) continue;
-            for (int b = r * blocks_per_row(); b < (r + 1) * blocks_per_row(); ++b)
-                if (block_far_[b] >= nearest && blocks_[b].meets(rect)) return true;
-        }
+        for (int b = 0; b < n_blocks_; b += 4)
+            if (blocks_meeting(b, rect, nearest)) return true;
         return false;
     }
 
@@ -452,12 +459,10 @@ class BundleTracer {
         int n = 0;  // the rays to test (then the points are asked for: many leaves have none)
         const Double4 a0 = Double4{} + rect.a0, a1 = Double4{} + rect.a1, b0 = Double4{} + rect.b0,
                       b1 = Double4{} + rect.b1, near = Double4{} + nearest;
-        for (int r = 0; r < rows_; ++r) {
-            if (!rows_rect_[r].meets(rect)) continue;
-            for (int b = r * blocks_per_row(); b < (r + 1) * blocks_per_row(); ++b) {
-                if (block_far_[b] < nearest || !blocks_[b].meets(rect)) continue;
+        for (int first = 0; first < n_blocks_; first += 4) {
+            for (unsigned meeting = blocks_meeting(first, rect, nearest); meeting; meeting &= meeting - 1) {
                 // the block's rays (at most kBlock, in a row) four at a time
-                const int first_ray = block_first_[b];
+                const int b = first + __builtin_ctz(meeting), first_ray = block_first_[b];
                 unsigned in = 0;
                 for (int h = 0; h < kBlock; h += 4) {
                     Double4 a, bb, bound, w;
@@ -611,9 +616,11 @@ class BundleTracer {
     LaneAxis axes_[3];  ///< c, p, q
     double far_ = HUGE_VAL;  ///< the greatest of the blocks' far bounds
     float far_limit_ = HUGE_VALF;  ///< boxes whose least c.x (float) lies beyond this are beyond far_
-    Rect all_, rows_rect_[kMaxRays], blocks_[kMaxRays];
+    Rect all_, blocks_[kMaxRays];
     int n_blocks_ = 0, block_first_[kMaxRays + 1], block_of_[kMaxRays];  ///< block b: rays block_first_[b] .. [b + 1] - 1
-    double block_far_[kMaxRays];
+    // (the blocks' rectangles side by side, read four at a time: three more)
+    double block_far_[kMaxRays + 3], block_a0_[kMaxRays + 3], block_a1_[kMaxRays + 3], block_b0_[kMaxRays + 3],
+        block_b1_[kMaxRays + 3];
     std::size_t index_[kMaxRays];
     Ray ray_[kMaxRays];
     std::optional<Kernel> kernel_[kMaxRays];
