@@ -22,6 +22,8 @@ class CostChooser {
         const bool cheaper = cost_[1] < cost_[0];
         return ++picks_ % probe_ == 0 ? !cheaper : cheaper;
     }
+    /// The way that leads: the cheaper once both are measured, else the first.
+    [[nodiscard]] bool leading() const { return cost_[0] < 0 || cost_[1] < 0 ? first_ : cost_[1] < cost_[0]; }
     void record(bool way, double seconds_per_unit) {
         double& cost = cost_[way ? 1 : 0];
         cost = cost < 0 ? seconds_per_unit : 0.5 * (cost + seconds_per_unit);

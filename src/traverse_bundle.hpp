@@ -11,6 +11,7 @@
 #pragma once
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -142,11 +143,28 @@ class BundleTracer {
         // A bundle too wide to project, incoherent, or costlier than its rays (see
         // traverse and RowHistory): ray by ray.
         RowHistory& history = history_[std::size_t(rays_.tile_row(tile))];
-        history.bundles.run([&](bool bundle) {
-            if (bundle && enclose() && traverse(history.visit_budget() * n_)) return double(n_);
-            trace_by_ray(history);
-            return double(n_);
-        });
+        CostChooser& ways = history.bundles;
+        bool bundle = ways.pick();
+        // A look at ray by ray while bundles lead: the bundle's first rows traced again,
+        // timed per ray (the same answers), instead of the whole tile at 2x to 3x its
+        // bundle's time.
+        const bool look = !bundle && ways.leading();
+        bundle |= look;
+        const auto start = std::chrono::steady_clock::now();
+        if (bundle && enclose() && traverse(history.visit_budget() * n_)) {
+            ways.record(true, seconds_since(start) / n_);
+            if (look) {
+                const int sampled = (n_ + kSampleShare - 1) / kSampleShare;
+                const auto again = std::chrono::steady_clock::now();
+                trace_by_ray(history, sampled);
+                ways.record(false, seconds_since(again) / sampled);
+            }
+        } else {  // (a bundle cut short costs its visits and its rays: both are known)
+            const auto by_ray = std::chrono::steady_clock::now();
+            trace_by_ray(history, n_);
+            ways.record(false, seconds_since(by_ray) / n_);
+            if (bundle) ways.record(true, seconds_since(start) / n_);
+        }
         store_tile(store);
     }
 
@@ -154,8 +172,9 @@ class BundleTracer {
     /// What a worker has seen of a row of tiles: neighbouring tiles of a sweep cost alike
     /// (a lidar's rings meet a height field at the same range all around), so the row's
     /// tiles go as bundles or ray by ray, whichever the worker measures cheaper per ray
-    /// there (the other tried again every 64th tile: ray by ray, a frog's tile takes 2x to
-    /// 3x its bundle's time), and the nodes the row's rays tested bound what a bundle may
+    /// there (the other tried again every 64th tile; while bundles lead, ray by ray is
+    /// timed on a bundle's first rows: a frog's tile takes 2x to 3x its bundle's time ray
+    /// by ray), and the nodes the row's rays tested bound what a bundle may
     /// spend before it is cut and its rays go one by one. A bundle's visit of a node or
     /// leaf costs about as much as ten node tests of a single ray (1,100 cycles against 90
     /// to 170, rdtsc on the frog's and the terrain's scans): on the frog, whose rays test
@@ -175,18 +194,24 @@ class BundleTracer {
     /// the scene is larger than the caches (the terrain's grazing rings wait for memory at
     /// every node one after another; the frog's, which find it in the caches, lose little
     /// in flight).
-    void trace_by_ray(RowHistory& history) {
+    /// The tile's first `n` rays.
+    void trace_by_ray(RowHistory& history, int n) {
         unsigned nodes = 0;
         if (scene_.ray_bytes() < kInterleavedBytes) {
-            for (int j = 0; j < n_; ++j) hit_[j] = trace_ray<KernelT, Real>(scene_, ray_[j], context_, NoSink{}, &nodes);
+            for (int j = 0; j < n; ++j) hit_[j] = trace_ray<KernelT, Real>(scene_, ray_[j], context_, NoSink{}, &nodes);
         } else {
-            which_.resize(std::size_t(n_));
+            which_.resize(std::size_t(n));
             std::iota(which_.begin(), which_.end(), std::size_t(0));
             const auto take = [&](std::size_t j, const Ray&, const Hit<Real>& hit, NoSink*) { hit_[j] = hit; };
             trace_rays_interleaved<KernelT, Real, HitPolicy::closest>(scene_, TileRays{ray_}, which_, context_, take,
                                                                       static_cast<NoSink*>(nullptr), &nodes);
         }
-        history.nodes_per_ray = double(nodes) / n_;
+        history.nodes_per_ray = double(nodes) / n;
+    }
+    /// The part of a tile a look at ray by ray traces (trace): its first rows.
+    static constexpr int kSampleShare = 8;
+    static double seconds_since(std::chrono::steady_clock::time_point start) {
+        return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     }
 
     /// The tile's rays by their place in it, as trace_rays_interleaved asks for them.
