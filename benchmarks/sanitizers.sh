@@ -21,7 +21,7 @@ echo "== workdir $WORK"
 # 1. Throwaway venv with the runtime + test deps and the build backend (for --no-build-isolation).
 [[ -x "$PY" ]] || "${PYTHON:-python3}" -m venv "$WORK/venv"
 "$PY" -m pip install -q "numpy>=1.24" "vtk>=9.2" "pyvista>=0.48" "tqdm>=4" \
-    "pytest>=7" "libigl>=2.6" "hypothesis>=6" "matplotlib>=3.6" "scikit-build-core>=0.10" "nanobind>=2.4"
+    "pytest>=7" "libigl>=2.6" "hypothesis>=6" "matplotlib>=3.6" "scikit-build-core>=0.10" "nanobind>=2.4" "open3d"
 
 # 2. Build the core instrumented. The project's -march and -fno-fast-math -ffp-contract=off
 #    are added by CMakeLists.txt on top of these. Build type Debug with its flags set to -O1 -g:
@@ -72,7 +72,8 @@ env -u LD_PRELOAD ldd "$CORE" | grep -E "libasan|libubsan"
 T="$ROOT/tests"
 set +e
 "$PY" -m pytest -p no:cacheprovider --capture=sys -q "$T/test_scene.py" "$T/test_strategies.py" "$T/test_mesh.py" \
-    "$T/test_validate.py" "$T/test_filter.py" "$T/test_reference_libigl.py" "$T/test_tiles.py" "$@" 2>&1 | tee "$WORK/pytest.log"
+    "$T/test_validate.py" "$T/test_filter.py" "$T/test_reference_libigl.py" "$T/test_tiles.py" "$T/test_rays.py" \
+    "$T/test_sensors.py" "$@" 2>&1 | tee "$WORK/pytest.log"
 STATUS=${PIPESTATUS[0]}
 set -e
 
