@@ -103,7 +103,6 @@ class BundleTracer {
             b0 = std::min(b0, b), b1 = std::max(b1, b);
         }
         [[nodiscard]] double area() const { return (a1 - a0) * (b1 - b0); }
-        [[nodiscard]] bool holds(double a, double b) const { return a >= a0 && a <= a1 && b >= b0 && b <= b1; }
         [[nodiscard]] bool meets(const Rect& o) const { return a0 <= o.a1 && o.a0 <= a1 && b0 <= o.b1 && o.b0 <= b1; }
     };
     /// A node's lanes projected (project): their rectangles' sides and least distances.
@@ -190,11 +189,10 @@ class BundleTracer {
         }
     };
 
-    /// Traces the tile's rays one by one: one after another, or several in flight where
-    /// the scene is larger than the caches (the terrain's grazing rings wait for memory at
-    /// every node one after another; the frog's, which find it in the caches, lose little
-    /// in flight).
-    /// The tile's first `n` rays.
+    /// Traces the tile's first `n` rays one by one: one after another, or several in
+    /// flight where the scene is larger than the caches (the terrain's grazing rings wait
+    /// for memory at every node one after another; the frog's, which find it in the
+    /// caches, lose little in flight).
     void trace_by_ray(RowHistory& history, int n) {
         unsigned nodes = 0;
         if (scene_.ray_bytes() < kInterleavedBytes) {
