@@ -463,13 +463,10 @@ class BundleTracer {
             }
             for (int i = 0; i < n; ++i) {
                 const int c = order[i];
-                if (node.count[c] == 0) {
-                    const char* next = reinterpret_cast<const char*>(&scene_.wide[node.child[c]]);
-                    for (int line = 0; line < 4; ++line) prefetch_line(next + 64 * line);
-                } else {  // a leaf's block (its point indices and points follow when it is popped)
-                    const char* block = reinterpret_cast<const char*>(&scene_.leaf(node.child[c]));
-                    prefetch_range(block, LeafBlock::bytes(leaf_size(node.count[c])));
-                }
+                if (node.count[c] == 0)
+                    prefetch_range(&scene_.wide[node.child[c]], sizeof(WideNode));
+                else  // a leaf's block (its point indices and points follow when it is popped)
+                    prefetch_range(&scene_.leaf(node.child[c]), LeafBlock::bytes(leaf_size(node.count[c])));
                 stack[top++] = {node.child[c], node.count[c], extent[0][c], lanes.nearest[c], rects[c]};
             }
         }
