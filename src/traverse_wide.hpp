@@ -6,6 +6,7 @@
 
 #include <immintrin.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -56,11 +57,14 @@ class FloatLanes {
         // far one's largest with o rounded down; d < 0 the other way round. The exact o lies
         // within one float ulp of o's nearest float f (half an ulp from that rounding, far
         // less from the subtraction's), and f +- margin lies at least an ulp away: outward
-        // bounds without the branches of a directed rounding.
+        // bounds without the branches of a directed rounding. The margin is at least
+        // 2 kTinyBound: f +- margin is then a multiple of 2^-87 as the bounds are (wide_bvh.hpp),
+        // so that a difference of the two is 0 or at least 2^-87, never subnormal, nor its
+        // product with 1 / d (above 0.5).
         const __m128 sign = _mm_set1_ps(-0.0f);
         const __m128 f = _mm_movelh_ps(_mm_cvtpd_ps(o01), _mm_cvtpd_ps(o2));
         const __m128 d = _mm_movelh_ps(_mm_cvtpd_ps(d01), _mm_cvtpd_ps(d2));
-        const __m128 size = _mm_add_ps(_mm_mul_ps(_mm_andnot_ps(sign, f), _mm_set1_ps(0x1p-23f)), _mm_set1_ps(0x1p-126f));
+        const __m128 size = _mm_add_ps(_mm_mul_ps(_mm_andnot_ps(sign, f), _mm_set1_ps(0x1p-23f)), _mm_set1_ps(2 * kTinyBound));
         const __m128 margin = _mm_or_ps(size, _mm_and_ps(sign, d));  // the sign of d
         _mm_store_ps(org_near_, _mm_add_ps(f, margin));
         _mm_store_ps(org_far_, _mm_sub_ps(f, margin));
@@ -71,12 +75,13 @@ class FloatLanes {
             far_[k] = k + 3 - 3 * (negative >> k & 1);
         }
         tmin_ = round_down(ray.tmin);
+        tmin_ = tmin_ < kTinyBound ? 0.0f : tmin_;  // (lower still: no subnormal)
         return true;
     }
 
     /// Follows the far end of the search, `bound`: boxes beyond it are not entered.
     void set_bound(double bound) {
-        const float up = round_up(bound);
+        const float up = std::max(round_up(bound), bound > 0 ? kTinyBound : 0.0f);  // (higher still: no subnormal)
         tmax_ = up;
         // Entry distances are lower bounds of the exact ones up to their four roundings
         // (2^-21): a box whose entry lies beyond this may be passed over.

@@ -95,8 +95,8 @@ void place(Scene& scene, uint32_t from, uint32_t at, std::vector<PendingLeaf>& p
     for (int c = 0; c < n; ++c) {
         const Node& m = nodes[members[c]];
         for (int k = 0; k < 3; ++k) {
-            node.bounds[k][c] = m.box.lo[k];
-            node.bounds[3 + k][c] = m.box.hi[k];
+            node.bounds[k][c] = clear_of_tiny_lo(m.box.lo[k]);
+            node.bounds[3 + k][c] = clear_of_tiny_hi(m.box.hi[k]);
         }
         if (m.is_leaf()) {
             node.child[c] = add_leaf(m, pending, end);
@@ -152,8 +152,8 @@ void build_wide(Scene& scene, unsigned threads) {
         WideNode& node = wide[0];
         for (int c = 0; c < WideNode::kWidth; ++c) {
             for (int k = 0; k < 3; ++k) {
-                node.bounds[k][c] = c == 0 ? root.box.lo[k] : std::numeric_limits<float>::infinity();
-                node.bounds[3 + k][c] = c == 0 ? root.box.hi[k] : -std::numeric_limits<float>::infinity();
+                node.bounds[k][c] = c == 0 ? clear_of_tiny_lo(root.box.lo[k]) : std::numeric_limits<float>::infinity();
+                node.bounds[3 + k][c] = c == 0 ? clear_of_tiny_hi(root.box.hi[k]) : -std::numeric_limits<float>::infinity();
             }
             node.child[c] = c == 0 ? add_leaf(root, pending, end) : 0;
             node.count[c] = c == 0 ? leaf_count(root.count, root.index) : 0;

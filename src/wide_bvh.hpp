@@ -22,6 +22,23 @@ struct alignas(64) WideNode {
 };
 static_assert(sizeof(WideNode) == 256, "wide nodes are meant to be four cache lines");
 
+/// Magnitudes below this (but 0) appear in no wide node's bounds and no ray's numbers in
+/// its float slab tests (FloatLanes in traverse_wide.hpp), so that none of their
+/// differences and products is subnormal: Intel cores take about a hundred cycles, in
+/// microcode, over each instruction that meets a subnormal number. (A ray from a box's
+/// middle, a lidar's or a camera's, met them in every node whose bounds pass through it.)
+constexpr float kTinyBound = 0x1p-64f;
+/// A box's lower (upper) bound moved outward, to 0 or -kTinyBound (kTinyBound), when its
+/// magnitude is below kTinyBound.
+inline float clear_of_tiny_lo(float lo) {
+    if (!(lo > -kTinyBound && lo < kTinyBound) || lo == 0) return lo;
+    return lo > 0 ? 0.0f : -kTinyBound;
+}
+inline float clear_of_tiny_hi(float hi) {
+    if (!(hi > -kTinyBound && hi < kTinyBound) || hi == 0) return hi;
+    return hi < 0 ? 0.0f : kTinyBound;
+}
+
 /// A leaf lane's `count`: its triangles (1 to 8) in the low four bits, its first triangle
 /// above them, so that a search can ask for the leaf's point indices together with its
 /// block (the block holds the first triangle too, but reading it would wait for the block).

@@ -123,6 +123,32 @@ def test_rays_through_a_scene_beyond_the_caches_match_every_triangle_tested():
         )
 
 
+def test_rays_from_the_box_middle_through_tiny_triangles_around_it():
+    """A lidar or camera in the middle of a scene's box sits at the core's origin, where
+    node bounds can be tiny or subnormal; they are moved outward off such magnitudes
+    (src/wide_bvh.hpp, kTinyBound: subnormal numbers cost Intel cores a hundred cycles per
+    instruction). Rays from that middle, and from points 1e-30 off it, to triangles within
+    1e-21 and 1e-40 of it and to a cube around it find the hits of every triangle tested
+    (accel="none"), bit for bit."""
+    rng = np.random.default_rng(5)
+    cube = pv.Cube(x_length=2, y_length=2, z_length=2).triangulate()  # (its box's middle: 0)
+    corners = np.concatenate([rng.normal(scale=1e-21, size=(150, 3, 3)), rng.normal(scale=1e-40, size=(50, 3, 3))])
+    points = np.concatenate([cube.points, corners.reshape(-1, 3)])
+    tiny = len(cube.points) + np.arange(3 * len(corners)).reshape(-1, 3)
+    triangles = np.concatenate([cube.regular_faces, tiny])
+    scene = vrc.Scene(pv.PolyData(points, np.column_stack([np.full(len(triangles), 3), triangles]).ravel()))
+    n = 4000
+    origins = np.zeros((n, 3))
+    origins[n // 2 :] = rng.normal(scale=1e-30, size=(n - n // 2, 3))
+    targets = corners[rng.integers(0, len(corners), n)].mean(axis=1)
+    directions = np.where(rng.uniform(size=(n, 1)) < 0.8, targets - origins, rng.normal(size=(n, 3)))
+    bvh = scene.intersect(origins, directions, arrays=["triangle_id", "t"])
+    every = scene.intersect(origins, directions, arrays=["triangle_id", "t"], accel="none")
+    assert np.mean(bvh["triangle_id"] >= len(cube.regular_faces)) > 0.3  # (many hit the tiny ones)
+    for name in bvh:
+        np.testing.assert_array_equal(bvh[name], every[name], err_msg=name)
+
+
 @pytest.mark.parametrize("directions", ["fisheye", "unrelated", "vertices", "vertices at 1e5"])
 def test_one_origin_and_a_grid_of_directions_equal_ray_by_ray(directions):
     """One origin with (rows, columns, 3) directions goes in bundles (as a lidar does): the
