@@ -151,6 +151,7 @@ struct Request {
     std::optional<AnyArray> depth, barycentric, position, normal;
     std::optional<CellMap> cell_ids, surface_cell_ids, composite_ids;
     bool cells_are_triangles = false;  ///< triangle i came from cell i: cell_ids, surface_cell_ids unread
+    bool returns_only = false;         ///< rays only: misses written to depth alone (Outputs::returns_only)
     std::vector<FieldRequest> fields;
 };
 
@@ -216,6 +217,8 @@ vrc::Outputs<Real> outputs(const vrc::Scene& scene, const Request& q, std::size_
         return a->data();
     };
     out.cells_are_triangles = q.cells_are_triangles;
+    if (q.returns_only && !out.depth) throw std::invalid_argument("returns_only needs depth, which tells the misses");
+    out.returns_only = q.returns_only;
     if (out.cell_id && !q.cells_are_triangles) out.cell_ids = per_triangle(q.cell_ids, "cell_ids");
     if (out.composite_index) out.composite_ids = per_triangle(q.composite_ids, "composite_ids");
     for (const FieldRequest& f : q.fields) {
@@ -282,6 +285,7 @@ bool run(const vrc::Scene& scene, const Rays& rays, const Request& q) {
 template <class Real>
 bool cast_as(const vrc::Scene& scene, const Request& q) {
     if (q.frame && q.any_hit) throw std::invalid_argument("any_hit serves rays, not cameras");
+    if (q.frame && q.returns_only) throw std::invalid_argument("returns_only serves rays, not cameras");
     if (q.frame) return run<Real>(scene, camera_rays(scene, q), q);
     if (!q.origins || !q.directions) throw std::invalid_argument("a request needs a camera frame or origins and directions");
     if (!scene.has_bvh() && q.accel != "none") throw std::invalid_argument("a scene built without a BVH casts camera rays only");
@@ -387,6 +391,7 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         .def_rw("composite_ids", &Request::composite_ids, nb::arg().none())
         .def_rw("surface_cell_ids", &Request::surface_cell_ids, nb::arg().none())
         .def_rw("cells_are_triangles", &Request::cells_are_triangles)
+        .def_rw("returns_only", &Request::returns_only)
         .def(
             "add_field",
             [](Request& q, ConstAnyArray values, AnyArray out, bool per_point) {

@@ -54,6 +54,10 @@ struct Outputs {
     /// Input triangle i came from cell i (and row i of the cell arrays): cell_ids and
     /// surface_cell_ids are then not read (a scattered load per hit spared).
     bool cells_are_triangles = false;
+    /// Only the hits' rows are read (a lidar's returns): a miss is written to depth alone,
+    /// which tells them apart, and the other arrays' rows of misses are left as they were.
+    /// Most of a scan's beams may miss, and their rows were most of its stores.
+    bool returns_only = false;
 
     /// Whether an output needs the hit's exact depth or weights (else a hit known by its
     /// triangle alone is enough: TileTracer's sure hits).
@@ -145,6 +149,7 @@ class OutputWriter {
     template <std::size_t kCount = 0>
     void misses(std::size_t k, std::size_t n = kCount) const {
         if constexpr (kCount != 0) n = kCount;
+        if (out_.returns_only && out_.depth) return put_n(out_.depth + k, n, kNaN);
         if (out_.triangle_id) put_n(out_.triangle_id + k, n, int64_t(-1));
         if (out_.cell_id) put_n(out_.cell_id + k, n, int64_t(-1));
         if (out_.composite_index) std::fill_n(out_.composite_index + k, n, int64_t(-1));

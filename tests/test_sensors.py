@@ -235,6 +235,13 @@ def _sweep_cases():
         vrc.Lidar((0.013, -0.021, 0.007), [-5, 0, 5, 10], 900, min_range=0.9, max_range=1.0),
     )
     poles = ("wide tiles", bumpy_sphere(4), vrc.Lidar((0.21, -0.033, 0.017), [-90, -60, -20, 0, 20, 60, 90], 12))
+    # a scene the core holds rescaled (lengths times 2**-41), most beams missing: the
+    # returns' positions scaled back, the misses' rows, never written, not read
+    scaled = (
+        "scaled 1e12",
+        bumpy_sphere(4).scale(1e12, inplace=False),
+        vrc.Lidar((2.5e12, 0.4e12, 0.3e12), np.linspace(-30, 30, 20), 400, forward=(-1, 0, 0)),
+    )
     import pyvista as pv
 
     # beams at multiples of 45 degrees pass within rounding of the box's edges and corners
@@ -252,7 +259,7 @@ def _sweep_cases():
     # over a finer height field, the rows of tiles whose beams graze it: bundles cut short,
     # budgets from the row's rays, rows going on as bundles or ray by ray, whichever is cheaper
     grazing = ("grazing rows", height_field(400), vrc.Lidar((5, 5, 2.3), np.linspace(-25, 15, 32), 256))
-    return [inside, outside, far, ranged, poles, edges, coarse, grazing]
+    return [inside, outside, far, ranged, poles, scaled, edges, coarse, grazing]
 
 
 @pytest.mark.parametrize("case", _sweep_cases(), ids=lambda case: case[0])

@@ -407,6 +407,7 @@ class Scene:
             False,
             {"threads": threads},
             sweep_rows=len(lidar.elevations),
+            returns_only=True,
         )
         ranges = buffers["Depth"].astype(np.float64, copy=False)
         returned = np.isfinite(ranges)
@@ -715,9 +716,11 @@ class Scene:
         backface_culling: bool,
         options: dict,
         sweep_rows: int = 0,
+        returns_only: bool = False,
     ) -> tuple[dict[str, np.ndarray], tuple[int, ...]]:
         """The output arrays ``names`` (image names: Depth is t) of arbitrary rays, one row
-        per ray, and the batch shape (``sweep_rows``: see _ray_request)."""
+        per ray, and the batch shape (``sweep_rows``: see _ray_request). With
+        ``returns_only``, the rows of misses hold NaN in Depth and anything elsewhere."""
         precision = options.get("precision", "float64")
         request, shape, (k, j) = self._ray_request(
             origins,
@@ -735,10 +738,16 @@ class Scene:
         found = mesh_arrays(self._mesh)
         buffers = allocate(found, names, request.directions.shape[0], _precision(precision), self._outputs)
         request_outputs(request, self._mesh, found, buffers)
+        request.returns_only = returns_only
         _core.cast(self._core, request)
         if "Depth" in names:
             shift_lengths(buffers["Depth"], k - j, "t")
-        if "Position" in names:
+        if "Position" in names and returns_only and k:  # (the rows of misses hold anything)
+            returned = np.isfinite(buffers["Depth"])
+            positions = buffers["Position"][returned]
+            shift_lengths(positions, k, "position", distance=False)
+            buffers["Position"][returned] = positions
+        elif "Position" in names:
             shift_lengths(buffers["Position"], k, "position", distance=False)
         return buffers, shape
 
