@@ -135,10 +135,7 @@ class BundleTracer {
                 bound_[j] = ray_[j].tmax;
             }
         }
-        if (scene_.wide.empty()) {
-            for (int j = 0; j < n_; ++j) store(index_[j], ray_[j], hit_[j]);
-            return;
-        }
+        if (scene_.wide.empty() || !may_meet_scene()) return store_tile(store);
         // A bundle too wide to project, incoherent, or costlier than its rays (see
         // traverse and RowHistory): ray by ray.
         RowHistory& history = history_[std::size_t(rays_.tile_row(tile))];
@@ -188,6 +185,28 @@ class BundleTracer {
             return nodes_per_ray < 0 ? kVisitsPerRay : std::clamp(nodes_per_ray / kNodesPerVisit, 0.25, double(kVisitsPerRay));
         }
     };
+
+    /// Whether some ray of the tile may meet the scene's box: not when, on some axis, the
+    /// origin lies beyond the box and each ray points away from it or along it (the rings
+    /// of a lidar above a height field that look up: they made the bundle's projection,
+    /// and before that every array's miss, for nothing). The origin must be beyond the
+    /// box by more than its rounding relative to the anchor.
+    [[nodiscard]] bool may_meet_scene() const {
+        unsigned away[2] = {0, 0};  // axes with the origin above (below) the box
+        for (int k = 0; k < 3; ++k) {
+            const double margin = 0x1p-50 * (std::fabs(origin_[k]) + reach_);
+            away[0] |= unsigned(origin_[k] > double(scene_.bounds.hi[k]) + margin) << k;
+            away[1] |= unsigned(origin_[k] < double(scene_.bounds.lo[k]) - margin) << k;
+        }
+        if (!(away[0] | away[1])) return true;
+        for (int j = 0; j < n_; ++j) {
+            const double* d = ray_[j].dir;
+            unsigned leaving = 0;
+            for (int k = 0; k < 3; ++k) leaving |= unsigned(((away[0] >> k & 1) && d[k] >= 0) || ((away[1] >> k & 1) && d[k] <= 0));
+            if (!leaving) return true;
+        }
+        return false;
+    }
 
     /// Traces the tile's first `n` rays one by one: one after another, or several in
     /// flight where the scene is larger than the caches (the terrain's grazing rings wait
