@@ -134,7 +134,7 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
     const bool interleave = !kBruteForce && scene.ray_bytes() >= kInterleavedBytes;
     // `by_ray` (a worker's): whether a tile of coherent rays goes one ray after another or
     // several in flight (incoherent ones always go several in flight).
-    auto trace_rays = [&](std::size_t tile, CostChooser& by_ray) {
+    auto trace_rays = [&](std::size_t tile, CostChooser& by_ray, InFlightChooser& in_flight) {
         // The seed's bounding test, a whole tile at a time: tiles that cannot see the
         // scene are misses without a single ray made.
         const bool may_hit = rays.tile_may_hit(tile);
@@ -144,10 +144,16 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         const auto interleaved = [&] {
             const DeferredStore<OutputWriter<Real>> take{store};
             NoSink* no_sinks = nullptr;
-            if (context.any_hit)
-                trace_rays_interleaved<Kernel, Real, HitPolicy::any>(scene, rays, tile_rays, context, take, no_sinks, &nodes);
-            else
-                trace_rays_interleaved<Kernel, Real, HitPolicy::closest>(scene, rays, tile_rays, context, take, no_sinks, &nodes);
+            in_flight.run([&](int searches) {
+                const unsigned before = nodes;
+                if (context.any_hit)
+                    trace_rays_interleaved<Kernel, Real, HitPolicy::any>(scene, rays, tile_rays, context, take, no_sinks, &nodes,
+                                                                         searches);
+                else
+                    trace_rays_interleaved<Kernel, Real, HitPolicy::closest>(scene, rays, tile_rays, context, take, no_sinks,
+                                                                             &nodes, searches);
+                return nodes - before;
+            });
         };
         if (may_hit && interleave && !coherent(scene, rays, tile_rays)) return interleaved();
         unsigned* counted = interleave ? &nodes : nullptr;  // (only the chooser reads them)
@@ -207,8 +213,9 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
             }
         }
         CostChooser by_ray;
+        InFlightChooser in_flight;
         for (std::size_t tile; !abort.load(std::memory_order_relaxed) && (tile = next.fetch_add(1)) < n_tiles;) {
-            trace_rays(tile, by_ray);
+            trace_rays(tile, by_ray, in_flight);
             tile_done();
         }
     };

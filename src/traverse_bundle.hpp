@@ -220,8 +220,12 @@ class BundleTracer {
             which_.resize(std::size_t(n));
             std::iota(which_.begin(), which_.end(), std::size_t(0));
             const auto take = [&](std::size_t j, const Ray&, const Hit<Real>& hit, NoSink*) { hit_[j] = hit; };
-            trace_rays_interleaved<KernelT, Real, HitPolicy::closest>(scene_, TileRays{ray_}, which_, context_, take,
-                                                                      static_cast<NoSink*>(nullptr), &nodes);
+            in_flight_.run([&](int searches) {
+                const unsigned before = nodes;
+                trace_rays_interleaved<KernelT, Real, HitPolicy::closest>(scene_, TileRays{ray_}, which_, context_, take,
+                                                                          static_cast<NoSink*>(nullptr), &nodes, searches);
+                return nodes - before;
+            });
         }
         history.nodes_per_ray = double(nodes) / n;
     }
@@ -673,6 +677,7 @@ class BundleTracer {
     double bound_[kMaxRays + kBlock], w_[kMaxRays + kBlock], a_[kMaxRays + kBlock], b_[kMaxRays + kBlock];
     std::vector<RowHistory> history_;  ///< by row of tiles
     std::vector<std::size_t> which_;   ///< a tile's rays, for trace_rays_interleaved
+    InFlightChooser in_flight_;        ///< and how many of them in flight
     uint32_t hit_prims_[kMaxRays];     ///< the triangles a tile's rays hit
 };
 

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "camera_rays.hpp"
+#include "cost_chooser.hpp"
 #include "kernel_watertight.hpp"
 #include "lanes.hpp"
 #include "traverse.hpp"
@@ -519,13 +520,17 @@ struct IsDeferred<DeferredStore<Writer>> : std::true_type {};
 /// caches spend most of their time waiting. The answers are trace_ray's; rays finish in any
 /// order. With HitPolicy::all each search in flight has a sink of its own among `sinks`
 /// (kInFlight of them), readied for ray k by `sink.start(k, ray)`; `store` then receives it
-/// too: `store(k, ray, hit, sink)` (nullptr without sinks). `nodes` as trace_ray's. Sixteen
-/// in flight: enough to keep the memory busy for random rays through the frog (fewer were
-/// slower, more no faster).
+/// too: `store(k, ray, hit, sink)` (nullptr without sinks). `nodes` as trace_ray's.
+/// `in_flight` (at most kInFlight) searches take turns. Sixteen kept an AMD EPYC's memory
+/// busy for random rays through the frog (eight were 1.11x the time); on an Intel Xeon,
+/// whose cores hold fewer lines in flight (about 12 fill buffers against 22 or more), the
+/// prefetches of sixteen waited for a free one and eight took 0.91x the time: callers
+/// measure both (InFlightChooser).
 constexpr int kInFlight = 16;
 template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Rays, class Store, class Sink = NoSink>
 void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vector<std::size_t>& which,
-                            const CastContext& context, Store&& store, Sink* sinks = nullptr, unsigned* nodes = nullptr) {
+                            const CastContext& context, Store&& store, Sink* sinks = nullptr, unsigned* nodes = nullptr,
+                            int in_flight = kInFlight) {
     using Search = WideSearch<Kernel, Real, kPolicy, FloatLanes, true, Sink>;
     constexpr bool kDeferred = IsDeferred<std::decay_t<Store>>::value;
     struct Finished {  // a hit whose store waits for a round of turns (DeferredStore)
@@ -549,7 +554,7 @@ void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vec
         while (next < which.size()) {
             const std::size_t k = which[next++];
             if constexpr (std::is_same_v<Rays, ArrayRays>) {  // (other rays are computed, or in the cache)
-                if (next + kInFlight / 2 < which.size()) rays.prefetch(which[next + kInFlight / 2]);
+                if (next + std::size_t(in_flight / 2) < which.size()) rays.prefetch(which[next + std::size_t(in_flight / 2)]);
             }
             slot.ray = rays.ray(k);
             if constexpr (!std::is_same_v<Sink, NoSink>) {
@@ -569,10 +574,11 @@ void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vec
         }
         return false;
     };
-    for (int i = 0; i < kInFlight; ++i)
+    in_flight = std::clamp(in_flight, 1, kInFlight);
+    for (int i = 0; i < in_flight; ++i)
         if (refill(i)) ++active;
     while (active > 0) {
-        for (int i = 0; i < kInFlight; ++i) {
+        for (int i = 0; i < in_flight; ++i) {
             Slot& slot = slots[i];
             if constexpr (kDeferred) {
                 if (slot.finished) {
@@ -601,5 +607,19 @@ void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vec
         for (Slot& slot : slots)
             if (slot.finished) store(slot.finished->k, slot.finished->ray, slot.finished->hit, nullptr);
 }
+
+/// Picks the searches in flight for trace_rays_interleaved, sixteen or eight, by their
+/// measured cost per node on this machine (see kInFlight). One per worker.
+class InFlightChooser {
+   public:
+    /// Runs trace(in_flight), which returns the nodes it tested, with the count picked.
+    template <class Trace>
+    void run(Trace&& trace) {
+        ways_.run([&](bool fewer) { return double(trace(fewer ? kInFlight / 2 : kInFlight)); });
+    }
+
+   private:
+    CostChooser ways_;
+};
 
 }  // namespace vrc
