@@ -127,13 +127,19 @@ void for_each_crossings(const Scene& scene, const ArrayRays& rays, unsigned thre
             each(p, std::size_t(sink.k), sink.hits);
         };
         std::vector<std::size_t> chunk;
+        InFlightChooser in_flight;
         for (std::size_t first; (first = next_chunk.fetch_add(1) * ArrayRays::kChunk) < n;) {
             chunk.clear();
             for (std::size_t k = first; k < std::min(n, first + ArrayRays::kChunk); ++k) chunk.push_back(k);
             if (interleave && !coherent(scene, rays, chunk)) {
-                trace_rays_interleaved<Watertight, double, HitPolicy::all>(
-                    scene, rays, chunk, CastContext{},
-                    [&](std::size_t, const Ray&, const Hit<double>&, CrossingSink* sink) { finish(*sink); }, sinks);
+                in_flight.run([&](int searches) {
+                    unsigned nodes = 0;
+                    trace_rays_interleaved<Watertight, double, HitPolicy::all>(
+                        scene, rays, chunk, CastContext{},
+                        [&](std::size_t, const Ray&, const Hit<double>&, CrossingSink* sink) { finish(*sink); }, sinks,
+                        &nodes, searches);
+                    return nodes;
+                });
                 continue;
             }
             for (const std::size_t k : chunk) {
