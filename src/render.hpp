@@ -160,6 +160,11 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
         const auto one_by_one = [&] {
             rays.for_each_in_tile(tile, [&](std::size_t k) {
                 if (!may_hit) return store(k, Ray{}, Hit<Real>{});  // (store reads the ray of hits only)
+                // (the input rays asked for eight ahead: random rays through a 20 k-triangle
+                // scene took 0.93x to 0.97x the time of the hardware's prefetchers alone)
+                if constexpr (std::is_same_v<Rays, ArrayRays>) {
+                    if (k + 8 < rays.size()) rays.prefetch(k + 8);
+                }
                 const Ray ray = rays.ray(k);
                 constexpr HitPolicy kAny = HitPolicy::any;
                 if (context.any_hit)
