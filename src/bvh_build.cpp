@@ -455,8 +455,6 @@ inline uint32_t slice(uint32_t begin, uint32_t end, unsigned t, unsigned n) {
     return begin + static_cast<uint32_t>((uint64_t(end - begin) * t) / n);
 }
 
-/// The split of one node, decided (and the triangles partitioned) by one thread or by all.
-/// Returns false for a leaf; otherwise fills the two children's tasks.
 /// The split of one node (binned SAH, or a median split), its triangles partitioned.
 /// Returns false for a leaf; otherwise fills the two children's tasks.
 bool split_node(Ref* refs, uint32_t* index, const Task& t, Task& left, Task& right) {
