@@ -128,17 +128,16 @@ void for_each_crossings(const Scene& scene, const ArrayRays& rays, unsigned thre
         };
         std::vector<std::size_t> chunk;
         InFlightChooser in_flight;
+        unsigned nodes = 0;  // (the chooser's unit of work)
         for (std::size_t first; (first = next_chunk.fetch_add(1) * ArrayRays::kChunk) < n;) {
             chunk.clear();
             for (std::size_t k = first; k < std::min(n, first + ArrayRays::kChunk); ++k) chunk.push_back(k);
             if (interleave && !coherent(scene, rays, chunk)) {
-                in_flight.run([&](int searches) {
-                    unsigned nodes = 0;
+                in_flight.run(nodes, [&](int searches) {
                     trace_rays_interleaved<Watertight, double, HitPolicy::all>(
                         scene, rays, chunk, CastContext{},
                         [&](std::size_t, const Ray&, const Hit<double>&, CrossingSink* sink) { finish(*sink); }, sinks,
                         &nodes, searches);
-                    return nodes;
                 });
                 continue;
             }

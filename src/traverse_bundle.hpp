@@ -220,11 +220,9 @@ class BundleTracer {
             which_.resize(std::size_t(n));
             std::iota(which_.begin(), which_.end(), std::size_t(0));
             const auto take = [&](std::size_t j, const Ray&, const Hit<Real>& hit, NoSink*) { hit_[j] = hit; };
-            in_flight_.run([&](int searches) {
-                const unsigned before = nodes;
+            in_flight_.run(nodes, [&](int searches) {
                 trace_rays_interleaved<KernelT, Real, HitPolicy::closest>(scene_, TileRays{ray_}, which_, context_, take,
                                                                           static_cast<NoSink*>(nullptr), &nodes, searches);
-                return nodes - before;
             });
         }
         history.nodes_per_ray = double(nodes) / n;

@@ -521,11 +521,11 @@ struct IsDeferred<DeferredStore<Writer>> : std::true_type {};
 /// order. With HitPolicy::all each search in flight has a sink of its own among `sinks`
 /// (kInFlight of them), readied for ray k by `sink.start(k, ray)`; `store` then receives it
 /// too: `store(k, ray, hit, sink)` (nullptr without sinks). `nodes` as trace_ray's.
-/// `in_flight` (at most kInFlight) searches take turns. Sixteen kept an AMD EPYC's memory
-/// busy for random rays through the frog (eight were 1.11x the time); on an Intel Xeon,
-/// whose cores hold fewer lines in flight (about 12 fill buffers against 22 or more), the
-/// prefetches of sixteen waited for a free one and eight took 0.91x the time: callers
-/// measure both (InFlightChooser).
+/// `in_flight` (at most kInFlight) searches take turns. Sixteen keep an AMD EPYC's memory
+/// busy for random rays through the frog, where eight leave it idle; an Intel Xeon's cores
+/// hold fewer lines in flight (about 12 fill buffers against 22 or more), and there the
+/// prefetches of sixteen wait for a free one, so eight are faster: callers measure both
+/// (InFlightChooser).
 constexpr int kInFlight = 16;
 template <template <class> class Kernel, class Real, HitPolicy kPolicy, class Rays, class Store, class Sink = NoSink>
 void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vector<std::size_t>& which,
@@ -612,10 +612,15 @@ void trace_rays_interleaved(const Scene& scene, const Rays& rays, const std::vec
 /// measured cost per node on this machine (see kInFlight). One per worker.
 class InFlightChooser {
    public:
-    /// Runs trace(in_flight), which returns the nodes it tested, with the count picked.
+    /// Runs trace(in_flight) with the count picked; trace advances `nodes` by the nodes
+    /// its searches test (trace_rays_interleaved's `nodes`), the unit of its cost.
     template <class Trace>
-    void run(Trace&& trace) {
-        ways_.run([&](bool fewer) { return double(trace(fewer ? kInFlight / 2 : kInFlight)); });
+    void run(unsigned& nodes, Trace&& trace) {
+        ways_.run([&](bool fewer) {
+            const unsigned before = nodes;
+            trace(fewer ? kInFlight / 2 : kInFlight);
+            return double(nodes - before);
+        });
     }
 
    private:
