@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import time
 from functools import partial
@@ -30,7 +29,7 @@ from vtkraycast.testing import camera_rays
 sys.path.insert(0, str(Path(__file__).parent))
 import scenes
 from peer_casters import Open3DPeer, make_peers, more_peers
-from timing import alternated_ratio, median_seconds
+from timing import alternated_ratio, machine_description, median_seconds
 
 ROWS = {  # label -> Scene.cast options
     "default arrays, mesh's arrays included": {},
@@ -51,7 +50,7 @@ def main() -> None:
     parser.add_argument("--sample", type=int, default=2000, help="rays for the per-ray Python peers")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args()
-    machine = f"{platform.platform()}, {os.cpu_count()} cores"
+    machine = machine_description()
     print(machine, flush=True)
     n = args.pixels
     ratios: dict[tuple[str, str, str], tuple[float, float, float]] = {}

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import os
-import platform
 import sys
 import time
 from collections.abc import Callable
@@ -34,7 +33,7 @@ from vtkraycast.testing import bumpy_sphere
 sys.path.insert(0, str(Path(__file__).parent))
 import scenes
 from peer_casters import EmbreexPeer, LibiglPeer, Open3DPeer, TrimeshPeer
-from timing import alternated_ratio, median_seconds
+from timing import alternated_ratio, machine_description, median_seconds
 
 SCENES = {
     "ant (912 triangles)": examples.load_ant,
@@ -69,7 +68,7 @@ def main() -> None:
     parser.add_argument("--sample", type=int, default=100_000, help="rays for the single-thread peers")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args()
-    machine = f"{platform.platform()}, {os.cpu_count()} cores"
+    machine = machine_description()
     print(machine, flush=True)
     rng = np.random.default_rng(7)
     rows, others = [], []

@@ -56,6 +56,7 @@ from typing import Any, Callable
 
 import numpy as np
 from peer_casters import Peer, Result, make_peers
+from timing import cpu_model
 
 SEED = 20240611
 FLOOR = 1e-7  # error-rate floor on the chart's log axis (a zero is drawn at the floor)
@@ -64,16 +65,6 @@ FLOOR = 1e-7  # error-rate floor on the chart's log axis (a zero is drawn at the
 # ----------------------------------------------------------------------------------------
 # machine and command line
 # ----------------------------------------------------------------------------------------
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def machine_lines() -> list[str]:

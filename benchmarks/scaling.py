@@ -11,8 +11,6 @@ Writes ``scaling.md`` and ``scaling.png``. Medians of 3 casts; TriangleId only.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -27,7 +25,7 @@ import vtkraycast as vrc
 from vtkraycast.testing import bumpy_sphere
 
 sys.path.insert(0, str(Path(__file__).parent))
-from timing import median_seconds
+from timing import machine_description, median_seconds
 
 
 def timed(fn) -> float:
@@ -38,7 +36,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args()
-    machine = f"{platform.platform()}, {os.cpu_count()} cores"
+    machine = machine_description()
     print(machine, flush=True)
 
     by_triangles = []

@@ -13,8 +13,6 @@ otherwise; medians of repeats. Writes ``skipping.md``.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import sys
 from functools import partial
 from pathlib import Path
@@ -26,7 +24,7 @@ import vtkraycast as vrc
 from vtkraycast.testing import bumpy_sphere, camera_rays
 
 sys.path.insert(0, str(Path(__file__).parent))
-from timing import median_seconds
+from timing import machine_description, median_seconds
 
 
 def main() -> None:
@@ -35,7 +33,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args()
-    machine = f"{platform.platform()}, {os.cpu_count()} cores"
+    machine = machine_description()
     print(machine, flush=True)
 
     median_of = partial(median_seconds, repeats=args.repeats)

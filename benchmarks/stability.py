@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import os
 import platform
 import sys
 import time
@@ -29,6 +28,7 @@ from vtkraycast.validate import classify, exact_first_hits
 
 sys.path.insert(0, str(Path(__file__).parent))
 from peer_casters import make_peers
+from timing import machine_description
 
 Scenario = tuple[pv.PolyData, np.ndarray, np.ndarray]
 
@@ -130,7 +130,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args()
-    machine = f"{platform.platform()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    machine = f"{machine_description()}, Python {platform.python_version()}"
     print(machine)
     peers = make_peers()
     rows = []

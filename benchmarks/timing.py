@@ -2,11 +2,31 @@
 
 from __future__ import annotations
 
+import os
+import platform
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+
+def cpu_model() -> str:
+    """The CPU's model name (/proc/cpuinfo on Linux)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def machine_description() -> str:
+    """The machine a table was measured on: the platform, the CPU and its cores (the same
+    platform string has named machines whose figures differ by 2x)."""
+    return f"{platform.platform()}, {cpu_model()}, {os.cpu_count()} cores"
 
 
 def median_seconds(fn: Callable[[], Any], repeats: int) -> float:

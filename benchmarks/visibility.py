@@ -14,8 +14,6 @@ Open3D's ``list_intersections``, ``count_intersections`` against its
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -29,7 +27,7 @@ from vtkraycast.testing import bumpy_sphere
 
 sys.path.insert(0, str(Path(__file__).parent))
 import scenes
-from timing import alternated_ratio
+from timing import alternated_ratio, machine_description
 
 SCENES = {
     "bumpy sphere (20 k triangles)": lambda: bumpy_sphere(5),
@@ -134,7 +132,7 @@ def _vtk_enclosed(mesh, points) -> np.ndarray:
 
 
 def _write(args, rows, singles) -> None:
-    machine = f"{platform.platform()}, {os.cpu_count()} cores"
+    machine = machine_description()
     lines = [
         f"`python benchmarks/visibility.py --rays {args.rays} --pairs {args.pairs}` on {machine}. "
         f"{args.rays:,} random rays (origins in the box, random directions) or points per scene; Open3D's "
