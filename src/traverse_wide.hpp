@@ -154,6 +154,10 @@ struct NoSink {
     void operator()(uint32_t, double, const Real*) const {}
 };
 
+/// Scenes whose single-ray data take this much memory or more (beyond an L1 cache) have a
+/// leaf's point indices asked for before its filter runs, when rays go one at a time.
+constexpr std::size_t kPrefetchedIndexBytes = std::size_t(256) << 10;
+
 /// Closest hit (or with HitPolicy::any, any hit) along a ray in [tmin, tmax] through the
 /// wide BVH, children visited nearest first, a node at a time (`step`), so that several
 /// rays' searches can take turns and their memory accesses overlap (trace_rays_interleaved). Ties go
@@ -370,18 +374,26 @@ class WideSearch {
             leaf_ = next;
             leaf_stage_ = 1;
             prefetch_block(reinterpret_cast<const char*>(&scene_.leaf(next.child)));
-            // (an address as an integer: past the array where the hint is wrong)
-            const uintptr_t indices = reinterpret_cast<uintptr_t>(scene_.triangles.data()) +
-                                      12 * std::size_t(leaf_first_hint(next.count));
-            prefetch_range(reinterpret_cast<const char*>(indices), 12 * std::size_t(leaf_size(next.count)));
+            prefetch_indices(next.count);
             return After::step;
         } else {
+            // (the leaf's filter runs before its point indices are read: time for them to
+            // come from the L2 cache or beyond, where a scene's triangles lie when its
+            // single-ray data outgrow the L1 cache)
+            if (scene_.ray_bytes() >= kPrefetchedIndexBytes) prefetch_indices(next.count);
             return leaf(next.child, leaf_size(next.count)) ? After::stop : After::pop;
         }
     }
 
     /// Tests the `count` triangles of leaf `index`; true when the search is over (any hit).
     bool leaf(uint32_t index, uint32_t count) { return test_leaf(index, candidates(index, count)); }
+
+    /// Asks memory for the point indices of the leaf whose lane's count is `count`.
+    [[gnu::always_inline]] void prefetch_indices(uint32_t count) const {
+        // (an address as an integer: past the array where the hint is wrong)
+        const uintptr_t indices = reinterpret_cast<uintptr_t>(scene_.triangles.data()) + 12 * std::size_t(leaf_first_hint(count));
+        prefetch_range(reinterpret_cast<const char*>(indices), 12 * std::size_t(leaf_size(count)));
+    }
 
     /// The leaf's triangles that may meet the ray, as bits: those the filter leaves, or
     /// (other kernels) all.
