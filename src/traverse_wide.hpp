@@ -412,8 +412,9 @@ class WideSearch {
         const double tmin = ray_.tmin;
         const uint32_t first = scene_.leaf(index).first;
         // (a closest hit's store reads its input triangle index first: a scattered read,
-        // which in a scene beyond the L2 cache would wait as the search ends)
-        if constexpr (kPolicy == HitPolicy::closest)
+        // which in a scene beyond the L2 cache would wait as the search ends; staged
+        // searches' stores wait a round of turns for it instead, DeferredStore)
+        if constexpr (kPolicy == HitPolicy::closest && !kStaged)
             if (m) prefetch_line(scene_.prim_ids.data() + first + __builtin_ctz(m));
         for (; m; m &= m - 1) {
             const uint32_t k = first + __builtin_ctz(m);
