@@ -19,6 +19,7 @@ from .fields import (
     GEOMETRY_ARRAYS,
     allocate,
     mesh_arrays,
+    mesh_arrays_for,
     output_layouts,
     request_outputs,
     row_layout,
@@ -94,32 +95,34 @@ def _shifted(bound: float, shift: int) -> float:
         return math.inf
 
 
+def _ray_rows(value: Any, name: str) -> np.ndarray:
+    """``value`` as an array of shape (..., 3) and a numeric dtype, checked."""
+    a = value if type(value) is np.ndarray else np.asarray(value)
+    if a.ndim == 0 or a.shape[-1] != 3:
+        raise ValueError(f"{name} must have shape (..., 3), got {a.shape}")
+    if a.dtype.kind not in "fiu":
+        raise TypeError(f"{name} must be numeric, got dtype {a.dtype}")
+    return a
+
+
 def _ray_batch(origins: Any, directions: Any, threads: int) -> tuple[np.ndarray, np.ndarray, tuple[int, ...], tuple]:
     """Origins and directions of shapes (..., 3), broadcast against each other, as (n, 3)
     float64 rows, with the batch shape the outputs take and their extent (_core.ray_extent:
     least and greatest origin component, least and greatest direction length in max norm)."""
-    arrays = []
-    for value, name in ((origins, "origins"), (directions, "directions")):
-        a = np.asarray(value)
-        if a.ndim == 0 or a.shape[-1] != 3:
-            raise ValueError(f"{name} must have shape (..., 3), got {a.shape}")
-        if a.dtype.kind not in "fiu":
-            raise TypeError(f"{name} must be numeric, got dtype {a.dtype}")
-        arrays.append(a)
-    try:
-        shape = arrays[0].shape[:-1]
-        if arrays[1].shape[:-1] != shape:
-            shape = np.broadcast_shapes(shape, arrays[1].shape[:-1])
-    except ValueError:
-        raise ValueError(
-            f"origins {arrays[0].shape} and directions {arrays[1].shape} do not broadcast against each other"
-        ) from None
-    o, d = (
-        np.ascontiguousarray(
-            (a if a.shape[:-1] == shape else np.broadcast_to(a, (*shape, 3))).reshape(-1, 3), dtype=np.float64
-        )
-        for a in arrays
-    )
+    # (straight-line code: a call of a few rays spends as long here as in the core)
+    o, d = _ray_rows(origins, "origins"), _ray_rows(directions, "directions")
+    shape = o.shape[:-1]
+    if d.shape[:-1] != shape:
+        try:
+            shape = np.broadcast_shapes(shape, d.shape[:-1])
+        except ValueError:
+            raise ValueError(
+                f"origins {o.shape} and directions {d.shape} do not broadcast against each other"
+            ) from None
+        o = o if o.shape[:-1] == shape else np.broadcast_to(o, (*shape, 3))
+        d = d if d.shape[:-1] == shape else np.broadcast_to(d, (*shape, 3))
+    o = np.ascontiguousarray(o.reshape(-1, 3), dtype=np.float64)
+    d = np.ascontiguousarray(d.reshape(-1, 3), dtype=np.float64)
     finite, nonzero, *extent = _core.ray_extent(o, d, threads)
     if not finite:
         for a, name in ((o, "origins"), (d, "directions")):
@@ -704,6 +707,8 @@ class Scene:
         buffers, shape = self._cast_rays(
             origins, directions, [RAY_ARRAYS[name] for name in names], tmin, tmax, backface_culling, options
         )
+        if len(shape) == 1:  # (rows already)
+            return {name: buffers[RAY_ARRAYS[name]] for name in names}
         return {name: _batched(buffers[RAY_ARRAYS[name]], shape) for name in names}
 
     def _cast_rays(
@@ -735,7 +740,7 @@ class Scene:
             sweep_rows,
             grid=True,
         )
-        found = mesh_arrays(self._mesh)
+        found = mesh_arrays_for(self._mesh, names)
         buffers = allocate(found, names, request.directions.shape[0], _precision(precision), self._outputs)
         request_outputs(request, self._mesh, found, buffers)
         request.returns_only = returns_only
@@ -961,7 +966,7 @@ class Scene:
         after row (the core traces them in bundles). With ``grid``, one origin and a 2-D
         batch of directions (a camera of the caller's own) go as a sweep too; the request
         then holds that one origin."""
-        if not self.has_bvh and _accel(accel) != "none":
+        if _accel(accel) != "none" and not self._core.has_bvh:
             raise ValueError('this scene was built with bvh=False: intersect needs accel="none" (or bvh=True)')
         if sweep_rows:
             o, d = np.asarray(origins, dtype=np.float64).reshape(1, 3), directions
@@ -969,7 +974,7 @@ class Scene:
             o_min, o_max, d_min, d_max = float(o.min()), float(o.max()), 0.5, 1.0  # (unit directions)
         else:
             o, d, shape, (o_min, o_max, d_min, d_max) = _ray_batch(origins, directions, _threads(threads))
-            if grid and np.shape(origins) == (3,) and len(shape) == 2 and min(shape) > 1:
+            if grid and len(shape) == 2 and min(shape) > 1 and np.shape(origins) == (3,):
                 o, sweep_rows = o[:1], shape[0]
         tmin, tmax = float(tmin), float(tmax)
         if math.isnan(tmin) or math.isnan(tmax) or tmin > tmax:
@@ -989,7 +994,7 @@ class Scene:
         )
         request.sweep_rows = sweep_rows
         if not isinstance(j, np.ndarray):  # (else the bounds are 0 and inf, the same in any unit)
-            request.tmin, request.tmax = _shifted(tmin, k - j), _shifted(tmax, k - j)
+            request.tmin, request.tmax = (_shifted(tmin, k - j), _shifted(tmax, k - j)) if k != j else (tmin, tmax)
         return request, shape, (k, j)
 
 
