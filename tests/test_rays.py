@@ -84,6 +84,72 @@ def test_against_open3d_cast_rays(sphere):
     assert np.mean(sphere.occluded(origins, directions, tmax=0.6) == occluded) > 0.999
 
 
+def test_the_usual_call_answers_as_the_general_way():
+    """Calls with float64 arrays (n, 3) or (3,) and the default arrays go the core's quick
+    way (_core.quick_rays: it makes the outputs itself); their answers equal those of the
+    general way (arrays named), and a hit's cell id is the input cell (quads of two
+    triangles each) whose rectangle holds the hit point."""
+    mesh = pv.Plane(i_size=1, j_size=1, i_resolution=7, j_resolution=5)
+    scene = vrc.Scene(mesh)
+    rng = np.random.default_rng(8)
+    origins = rng.uniform(-0.7, 0.7, (400, 3)) + [0, 0, 1]
+    directions = rng.uniform(-0.5, 0.5, (400, 3)) - [0, 0, 1]
+    directions[::3] *= -1  # some rays leave the plane behind, some meet its back
+    for tmin, tmax, culling in ((0.0, np.inf, False), (0.5, 1.2, False), (0, np.inf, True)):
+        assert scene._quick_rays(origins, directions, tmin, tmax, None, culling, any_hit=False) is not None
+        quick = scene.intersect(origins, directions, tmin=tmin, tmax=tmax, backface_culling=culling)
+        general = scene.intersect(
+            origins, directions, tmin=tmin, tmax=tmax, backface_culling=culling, arrays=list(quick)
+        )
+        assert list(quick) == ["triangle_id", "cell_id", "t", "barycentric"]
+        for name in quick:
+            assert quick[name].dtype == general[name].dtype
+            np.testing.assert_array_equal(quick[name], general[name], err_msg=name)
+        np.testing.assert_array_equal(
+            scene.occluded(origins, directions, tmin=tmin, tmax=tmax, backface_culling=culling),
+            scene.occluded(origins, directions, tmin=tmin, tmax=tmax, backface_culling=culling, strategy="watertight"),
+        )
+    hits = scene.intersect(origins, directions)
+    hit = hits["triangle_id"] >= 0
+    assert 0.2 < hit.mean() < 0.8
+    points = origins[hit] + hits["t"][hit, None] * directions[hit]
+    centres = mesh.cell_centers().points[hits["cell_id"][hit]]
+    assert (np.abs(points - centres)[:, :2] <= [1 / 14 + 1e-12, 1 / 10 + 1e-12]).all()
+    one = scene.intersect(origins[5], directions[5])
+    assert one["triangle_id"].shape == () and one["barycentric"].shape == (3,)
+    for name in one:
+        np.testing.assert_array_equal(one[name], hits[name][5], err_msg=name)
+    assert scene.occluded(origins[5], directions[5]).shape == ()
+
+
+def test_unusual_calls_go_the_general_way(sphere):
+    """Rays the quick way cannot take as they are (directions shifted in the core, origins
+    beyond its bound, bad values, float32 arrays) are left to the general way, which casts
+    them or raises."""
+    origins, directions = random_rays(500, seed=9)
+    hits = sphere.intersect(origins, directions)
+    short = directions * 2.0**-40
+    assert sphere._quick_rays(origins, short, 0.0, np.inf, None, False, any_hit=False) is None
+    np.testing.assert_array_equal(sphere.intersect(origins, short)["t"], hits["t"] * 2.0**40)
+    as_float = sphere.intersect(origins.astype(np.float32), directions.astype(np.float32))
+    assert (as_float["triangle_id"] == hits["triangle_id"]).mean() > 0.99
+    far = origins.copy()
+    far[7] = [1e95, 0, 0]
+    assert sphere._quick_rays(far, directions, 0.0, np.inf, None, False, any_hit=False) is None
+    with pytest.raises(ValueError, match=r"a ray origin lies .* from the scene's centre"):
+        sphere.intersect(far, directions)
+    bad = origins.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(ValueError, match="origins must be finite; row 3"):
+        sphere.intersect(bad, directions)
+    zero = directions.copy()
+    zero[4] = 0
+    with pytest.raises(ValueError, match="directions must be non-zero"):
+        sphere.occluded(origins, zero)
+    with pytest.raises(ValueError, match="tmin must be >= 0"):
+        sphere.intersect(origins, directions, tmin=-1.0)
+
+
 @pytest.mark.parametrize("accel", ["bvh", "none"])
 @pytest.mark.parametrize("precision", ["float64", "float32"])
 def test_occluded_is_intersect_finding_a_hit_in_range(sphere, accel, precision):

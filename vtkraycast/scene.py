@@ -27,7 +27,7 @@ from .fields import (
 )
 from .image import fill_image, set_arrays
 from .image_pool import ImagePool
-from .magnitudes import direction_shifts, scene_scale, shift_lengths
+from .magnitudes import LIMIT, direction_shifts, scene_scale, shift_lengths
 from .mesh import PreparedMesh, prepare_mesh
 from .parallel import Workspace, cast_on_node, communicator, composite, default_threads, node_frames, triangle_keys
 from .sensors import Lidar, Panorama
@@ -56,6 +56,9 @@ DEFAULT_RAY_ARRAYS = ("triangle_id", "cell_id", "t", "barycentric")
 _GRID_POINTS = 4096
 _GRID_CELLS_PER_TRIANGLE = 2.0
 _GRID_MOST_PER_AXIS = 128
+#: How far (in each coordinate, plus the scene's centre's largest) ray origins may lie
+#: from the scene's centre in float64 casts of an unscaled scene (Scale.check_origins).
+_ORIGIN_LIMIT = math.ldexp(1.0, LIMIT[np.float64])
 #: Refuse images whose output arrays alone would exceed this many bytes.
 _MAX_OUTPUT_BYTES = int(os.environ.get("VTKRAYCAST_MAX_OUTPUT_BYTES", 16 * 2**30))
 
@@ -702,6 +705,10 @@ class Scene:
         >>> hits["t"].tolist(), hits["position"][1].tolist()
         ([1.0, 1.0], [0.5, 0.0, 0.0])
         """
+        if arrays is None and strategy == "auto" and precision == "float64" and accel == "bvh":
+            quick = self._quick_rays(origins, directions, tmin, tmax, threads, backface_culling, any_hit=False)
+            if quick is not None:
+                return dict(zip(DEFAULT_RAY_ARRAYS, quick))
         names = _ray_arrays(arrays, self._mesh.composite_ids is not None)
         options = dict(strategy=strategy, precision=precision, accel=accel, threads=threads)
         buffers, shape = self._cast_rays(
@@ -710,6 +717,54 @@ class Scene:
         if len(shape) == 1:  # (rows already)
             return {name: buffers[RAY_ARRAYS[name]] for name in names}
         return {name: _batched(buffers[RAY_ARRAYS[name]], shape) for name in names}
+
+    def _quick_rays(
+        self,
+        origins: Any,
+        directions: Any,
+        tmin: Any,
+        tmax: Any,
+        threads: int | None,
+        backface_culling: bool,
+        *,
+        any_hit: bool,
+    ) -> tuple[np.ndarray, ...] | None:
+        """The default outputs of intersect (any_hit: occluded's) by the core's quick way,
+        for the usual call: origins and directions float64 arrays of one shape ``(n, 3)``
+        or ``(3,)``, bounds given as numbers, a scene of one piece cast unscaled. None when
+        the general way must run (_core.quick_rays tells the rest), which then raises what
+        is wrong. A call of a few rays spent most of its time in the general way."""
+        if not (
+            type(origins) is np.ndarray
+            and type(directions) is np.ndarray
+            and origins.dtype == np.float64
+            and directions.dtype == np.float64
+            and origins.shape == directions.shape
+            and origins.shape[-1:] == (3,)
+            and origins.ndim <= 2
+            and type(tmin) in (float, int)
+            and type(tmax) in (float, int)
+            and not self._scale.shift
+            and self._mesh.composite_ids is None
+        ):
+            return None
+        mesh = self._mesh
+        quick = _core.quick_rays(
+            self._core,
+            origins.reshape(-1, 3),
+            directions.reshape(-1, 3),
+            float(tmin),
+            float(tmax),
+            self._scale.reach,
+            _ORIGIN_LIMIT,
+            None if mesh.cells_are_triangles else mesh.cell_ids,
+            any_hit,
+            bool(backface_culling),
+            _threads(threads),
+        )
+        if quick is None or origins.ndim == 2:
+            return quick
+        return tuple(a.reshape(a.shape[1:]) for a in quick)  # (one ray: arrays of shape () and (3,))
 
     def _cast_rays(
         self,
@@ -784,6 +839,10 @@ class Scene:
         >>> scene.occluded([0, 0, 2], [0, 0, -1], tmax=1.0).tolist()  # the sphere is 1.5 away
         False
         """
+        if strategy == "auto" and precision == "float64" and accel == "bvh":
+            quick = self._quick_rays(origins, directions, tmin, tmax, threads, backface_culling, any_hit=True)
+            if quick is not None:
+                return quick[0].view(bool)
         request, shape, _ = self._ray_request(
             origins, directions, tmin, tmax, strategy, precision, accel, threads, backface_culling
         )
