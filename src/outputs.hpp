@@ -149,13 +149,21 @@ class OutputWriter {
     template <std::size_t kCount = 0>
     void misses(std::size_t k, std::size_t n = kCount) const {
         if constexpr (kCount != 0) n = kCount;
-        if (out_.returns_only && out_.depth) return put_n(out_.depth + k, n, kNaN);
-        if (out_.triangle_id) put_n(out_.triangle_id + k, n, int64_t(-1));
-        if (out_.cell_id) put_n(out_.cell_id + k, n, int64_t(-1));
+        // (a single ray's miss, most of the rays that pass a small scene by: a store or
+        // three per array, where put_n's call and set-up cost a hundred instructions a ray)
+        const auto fill = [&](auto* p, std::size_t per_ray, auto v) {
+            if constexpr (kCount == 1)
+                for (std::size_t i = 0; i < per_ray; ++i) put(p + i, v);
+            else
+                put_n(p, n * per_ray, v);
+        };
+        if (out_.returns_only && out_.depth) return fill(out_.depth + k, 1, kNaN);
+        if (out_.triangle_id) fill(out_.triangle_id + k, 1, int64_t(-1));
+        if (out_.cell_id) fill(out_.cell_id + k, 1, int64_t(-1));
         if (out_.composite_index) std::fill_n(out_.composite_index + k, n, int64_t(-1));
         if (out_.valid) std::fill_n(out_.valid + k, n, uint8_t(0));
-        if (out_.depth) put_n(out_.depth + k, n, kNaN);
-        if (out_.barycentric) put_n(out_.barycentric + 3 * k, 3 * n, kNaN);
+        if (out_.depth) fill(out_.depth + k, 1, kNaN);
+        if (out_.barycentric) fill(out_.barycentric + 3 * k, 3, kNaN);
         if (out_.position) std::fill_n(out_.position + 3 * k, 3 * n, kNaN);
         if (out_.normal) std::fill_n(out_.normal + 3 * k, 3 * n, kNaN);
         for (const Field& f : out_.fields)

@@ -42,10 +42,10 @@ class FloatLanes {
         // The three axes at once in SSE2 lanes (either build): this runs once per ray, and
         // a small scene's ray meets only two or three nodes.
         const __m128d sign_d = _mm_set1_pd(-0.0);
-        const __m128d o01 = _mm_sub_pd(_mm_loadu_pd(ray.org), _mm_loadu_pd(anchor));
+        // (org[0] and org[1], dir[0] and dir[1] read apart: a ray just made is stored a
+        // double at a time, and a read across two stores waits for them to reach the cache)
+        const __m128d o01 = _mm_sub_pd(_mm_loadh_pd(_mm_load_sd(ray.org), ray.org + 1), _mm_loadu_pd(anchor));
         const __m128d o2 = _mm_sub_sd(_mm_load_sd(ray.org + 2), _mm_load_sd(anchor + 2));
-        // (dir[0] and dir[1] read apart: a ray just made is often stored as four doubles
-        // and four, and a read across the two stores waits for them to reach the cache)
         const __m128d d01 = _mm_loadh_pd(_mm_load_sd(ray.dir), ray.dir + 1), d2 = _mm_load_sd(ray.dir + 2);
         const auto unusable = [&](__m128d o, __m128d d) {  // (the unused fourth lane is 0, 0)
             const __m128d far_origin = _mm_cmpnle_pd(_mm_andnot_pd(sign_d, o), _mm_set1_pd(0x1p60));  // (or NaN)
