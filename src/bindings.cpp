@@ -16,6 +16,7 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <type_traits>
 
 #include "all_hits.hpp"
 #include "bvh.hpp"
@@ -300,15 +301,18 @@ bool cast_as(const vrc::Scene& scene, const Request& q) {
     return run<Real>(scene, vrc::ArrayRays(q.origins->data(), q.directions->data(), q.origins->shape(0), q.tmin, q.tmax), q);
 }
 
-/// Scene.intersect's default arrays (or occluded's answers, with `any_hit`) for rays
-/// (n, 3) that need none of what the general way (scene.py) does beyond a cast: finite,
-/// with nonzero directions whose largest components lie in [2^-17, 2^16) (no shift of
-/// t), origins within `limit` of the scene's centre as scene.py's Scale.check_origins
-/// bounds them (|component| + `reach`), a scene cast unscaled. The outputs are made here:
-/// a call of a few rays spent most of its time in the general way's Python. None when a
-/// condition fails; the general way then casts, or raises what is wrong.
+/// Scene.intersect's arrays (or occluded's answers, with `any_hit`) for rays (n, 3) that
+/// need none of what the general way (scene.py) does beyond a cast: finite, with nonzero
+/// directions whose largest components lie in [2^-17, 2^16) (no shift of t), origins
+/// within `limit` of the scene's centre as scene.py's Scale.check_origins bounds them
+/// (|component| + `reach`), a scene cast unscaled (no shift of positions). The outputs
+/// are made here: a call of a few rays spent most of its time in the general way's
+/// Python. `wanted`'s bits ask for triangle_id, cell_id, t, barycentric, position and
+/// normal (in that order, as the returned tuple's items; None where not asked for). None
+/// when a condition fails; the general way then casts, or raises what is wrong.
 nb::object quick_rays(const vrc::Scene& scene, Points origins, Points directions, double tmin, double tmax, double reach,
-                      double limit, std::optional<CellMap> cell_ids, bool any_hit, bool culling, int threads) {
+                      double limit, std::optional<CellMap> cell_ids, unsigned wanted, bool any_hit, bool culling,
+                      int threads) {
     const std::size_t n = origins.shape(0);
     if (n == 0 || directions.shape(0) != n || !scene.has_bvh() || !(tmin >= 0 && tmin <= tmax)) return nb::none();
     if (cell_ids && cell_ids->shape(0) != scene.n_triangles()) return nb::none();
@@ -324,19 +328,24 @@ nb::object quick_rays(const vrc::Scene& scene, Points origins, Points directions
     vrc::Outputs<double> out;
     out.cells_are_triangles = !cell_ids;
     out.cell_ids = cell_ids ? cell_ids->data() : nullptr;
-    nb::object arrays;
+    nb::object arrays[6];
+    for (nb::object& a : arrays) a = nb::none();  // (where not asked for)
+    const auto make = [&](int bit, auto*& pointer, std::size_t width) {
+        using T = std::remove_reference_t<decltype(*pointer)>;
+        if (!(wanted >> bit & 1)) return;
+        pointer = new T[width * n];
+        arrays[bit] = nb::cast(owned_array(pointer, n, width));
+    };
     if (any_hit) {
         out.valid = new uint8_t[n];
-        arrays = nb::make_tuple(owned_array(out.valid, n, 1));
+        arrays[0] = nb::cast(owned_array(out.valid, n, 1));
     } else {
-        out.triangle_id = new int64_t[n];
-        auto triangle_id = owned_array(out.triangle_id, n, 1);
-        out.cell_id = new int64_t[n];
-        auto cell_id = owned_array(out.cell_id, n, 1);
-        out.depth = new double[n];
-        auto depth = owned_array(out.depth, n, 1);
-        out.barycentric = new double[3 * n];
-        arrays = nb::make_tuple(triangle_id, cell_id, depth, owned_array(out.barycentric, n, 3));
+        make(0, out.triangle_id, 1);
+        make(1, out.cell_id, 1);
+        make(2, out.depth, 1);
+        make(3, out.barycentric, 3);
+        make(4, out.position, 3);
+        make(5, out.normal, 3);
     }
     PythonPoll poll;
     {
@@ -345,7 +354,7 @@ nb::object quick_rays(const vrc::Scene& scene, Points origins, Points directions
                          vrc::CastContext{culling, any_hit}, n_threads, std::ref(poll));
     }
     if (poll.raised) throw nb::python_error();
-    return arrays;
+    return nb::make_tuple(arrays[0], arrays[1], arrays[2], arrays[3], arrays[4], arrays[5]);
 }
 
 bool cast(const vrc::Scene& scene, const Request& q) {
@@ -609,9 +618,10 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         "Whether this CPU runs the AVX2 build of the core (AVX2 and FMA).");
     bind_compositing(m);
     m.def("quick_rays", &quick_rays, "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "reach"_a, "limit"_a,
-          "cell_ids"_a.none(), "any_hit"_a, "culling"_a, "threads"_a,
-          "(triangle_id, cell_id, t, barycentric), or with any_hit (valid,), of the usual call of Scene.intersect or "
-          "occluded; None when it needs the general way (see scene.py).");
+          "cell_ids"_a.none(), "wanted"_a, "any_hit"_a, "culling"_a, "threads"_a,
+          "(triangle_id, cell_id, t, barycentric, position, normal), those not wanted None, or with any_hit "
+          "(valid, None, ...), of the usual call of Scene.intersect or occluded; None when it needs the general way "
+          "(see scene.py).");
     m.def("cast", &cast, "scene"_a, "request"_a,
           "Casts a request's rays (released GIL, all outputs written by the workers). Returns False if aborted.");
 }

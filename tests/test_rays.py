@@ -85,23 +85,27 @@ def test_against_open3d_cast_rays(sphere):
 
 
 def test_the_usual_call_answers_as_the_general_way():
-    """Calls with float64 arrays (n, 3) or (3,) and the default arrays go the core's quick
-    way (_core.quick_rays: it makes the outputs itself); their answers equal those of the
-    general way (arrays named), and a hit's cell id is the input cell (quads of two
-    triangles each) whose rectangle holds the hit point."""
+    """Calls with float64 arrays (n, 3) or (3,) go the core's quick way (_core.quick_rays:
+    it makes the outputs itself); their answers equal those of the general way (taken by
+    naming the strategy "auto" stands for), and a hit's cell id is the input cell (quads of
+    two triangles each) whose rectangle holds the hit point."""
     mesh = pv.Plane(i_size=1, j_size=1, i_resolution=7, j_resolution=5)
     scene = vrc.Scene(mesh)
     rng = np.random.default_rng(8)
     origins = rng.uniform(-0.7, 0.7, (400, 3)) + [0, 0, 1]
     directions = rng.uniform(-0.5, 0.5, (400, 3)) - [0, 0, 1]
     directions[::3] *= -1  # some rays leave the plane behind, some meet its back
-    for tmin, tmax, culling in ((0.0, np.inf, False), (0.5, 1.2, False), (0, np.inf, True)):
-        assert scene._quick_rays(origins, directions, tmin, tmax, None, culling, any_hit=False) is not None
-        quick = scene.intersect(origins, directions, tmin=tmin, tmax=tmax, backface_culling=culling)
-        general = scene.intersect(
-            origins, directions, tmin=tmin, tmax=tmax, backface_culling=culling, arrays=list(quick)
-        )
-        assert list(quick) == ["triangle_id", "cell_id", "t", "barycentric"]
+    every = ["normal", "t", "triangle_id", "position", "cell_id", "barycentric"]
+    for tmin, tmax, culling, arrays in (
+        (0.0, np.inf, False, None),
+        (0.5, 1.2, False, every),
+        (0, np.inf, True, ["position"]),
+    ):
+        assert scene._quick_rays(origins, directions, tmin, tmax, None, culling, arrays or ["t"]) is not None
+        options = dict(tmin=tmin, tmax=tmax, backface_culling=culling, arrays=arrays)
+        quick = scene.intersect(origins, directions, **options)
+        general = scene.intersect(origins, directions, **options, strategy="watertight")
+        assert list(quick) == (arrays or ["triangle_id", "cell_id", "t", "barycentric"])
         for name in quick:
             assert quick[name].dtype == general[name].dtype
             np.testing.assert_array_equal(quick[name], general[name], err_msg=name)
@@ -129,13 +133,13 @@ def test_unusual_calls_go_the_general_way(sphere):
     origins, directions = random_rays(500, seed=9)
     hits = sphere.intersect(origins, directions)
     short = directions * 2.0**-40
-    assert sphere._quick_rays(origins, short, 0.0, np.inf, None, False, any_hit=False) is None
+    assert sphere._quick_rays(origins, short, 0.0, np.inf, None, False, ["t"]) is None
     np.testing.assert_array_equal(sphere.intersect(origins, short)["t"], hits["t"] * 2.0**40)
     as_float = sphere.intersect(origins.astype(np.float32), directions.astype(np.float32))
     assert (as_float["triangle_id"] == hits["triangle_id"]).mean() > 0.99
     far = origins.copy()
     far[7] = [1e95, 0, 0]
-    assert sphere._quick_rays(far, directions, 0.0, np.inf, None, False, any_hit=False) is None
+    assert sphere._quick_rays(far, directions, 0.0, np.inf, None, False, ["t"]) is None
     with pytest.raises(ValueError, match=r"a ray origin lies .* from the scene's centre"):
         sphere.intersect(far, directions)
     bad = origins.copy()

@@ -51,6 +51,8 @@ RAY_ARRAYS = {
     "composite_index": "CompositeIndex",
 }
 DEFAULT_RAY_ARRAYS = ("triangle_id", "cell_id", "t", "barycentric")
+#: The arrays _core.quick_rays makes, in the order of its bits and outputs.
+_QUICK_ARRAYS = ("triangle_id", "cell_id", "t", "barycentric", "position", "normal")
 # contains answers batches of at least this many points with a grid of cells (about
 # _GRID_CELLS_PER_TRIANGLE a triangle), made once per scene.
 _GRID_POINTS = 4096
@@ -705,11 +707,11 @@ class Scene:
         >>> hits["t"].tolist(), hits["position"][1].tolist()
         ([1.0, 1.0], [0.5, 0.0, 0.0])
         """
-        if arrays is None and strategy == "auto" and precision == "float64" and accel == "bvh":
-            quick = self._quick_rays(origins, directions, tmin, tmax, threads, backface_culling, any_hit=False)
-            if quick is not None:
-                return dict(zip(DEFAULT_RAY_ARRAYS, quick))
         names = _ray_arrays(arrays, self._mesh.composite_ids is not None)
+        if strategy == "auto" and precision == "float64" and accel == "bvh":
+            quick = self._quick_rays(origins, directions, tmin, tmax, threads, backface_culling, names)
+            if quick is not None:
+                return {name: quick[_QUICK_ARRAYS.index(name)] for name in names}
         options = dict(strategy=strategy, precision=precision, accel=accel, threads=threads)
         buffers, shape = self._cast_rays(
             origins, directions, [RAY_ARRAYS[name] for name in names], tmin, tmax, backface_culling, options
@@ -726,14 +728,14 @@ class Scene:
         tmax: Any,
         threads: int | None,
         backface_culling: bool,
-        *,
-        any_hit: bool,
-    ) -> tuple[np.ndarray, ...] | None:
-        """The default outputs of intersect (any_hit: occluded's) by the core's quick way,
+        names: list[str] | None,
+    ) -> tuple[np.ndarray | None, ...] | None:
+        """Intersect's arrays ``names`` (None: occluded's answers), by the core's quick way,
         for the usual call: origins and directions float64 arrays of one shape ``(n, 3)``
-        or ``(3,)``, bounds given as numbers, a scene of one piece cast unscaled. None when
-        the general way must run (_core.quick_rays tells the rest), which then raises what
-        is wrong. A call of a few rays spent most of its time in the general way."""
+        or ``(3,)``, bounds given as numbers, a scene of one piece cast unscaled. The arrays
+        come in _QUICK_ARRAYS's order (None where not asked for; occluded's first). None
+        when the general way must run (_core.quick_rays tells the rest), which then raises
+        what is wrong. A call of a few rays spent most of its time in the general way."""
         if not (
             type(origins) is np.ndarray
             and type(directions) is np.ndarray
@@ -758,13 +760,14 @@ class Scene:
             self._scale.reach,
             _ORIGIN_LIMIT,
             None if mesh.cells_are_triangles else mesh.cell_ids,
-            any_hit,
+            0 if names is None else sum(1 << _QUICK_ARRAYS.index(name) for name in names),
+            names is None,
             bool(backface_culling),
             _threads(threads),
         )
         if quick is None or origins.ndim == 2:
             return quick
-        return tuple(a.reshape(a.shape[1:]) for a in quick)  # (one ray: arrays of shape () and (3,))
+        return tuple(None if a is None else a.reshape(a.shape[1:]) for a in quick)  # (one ray: shapes () and (3,))
 
     def _cast_rays(
         self,
@@ -840,7 +843,7 @@ class Scene:
         False
         """
         if strategy == "auto" and precision == "float64" and accel == "bvh":
-            quick = self._quick_rays(origins, directions, tmin, tmax, threads, backface_culling, any_hit=True)
+            quick = self._quick_rays(origins, directions, tmin, tmax, threads, backface_culling, None)
             if quick is not None:
                 return quick[0].view(bool)
         request, shape, _ = self._ray_request(
