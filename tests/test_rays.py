@@ -119,17 +119,23 @@ def test_the_usual_call_answers_as_the_general_way():
     points = origins[hit] + hits["t"][hit, None] * directions[hit]
     centres = mesh.cell_centers().points[hits["cell_id"][hit]]
     assert (np.abs(points - centres)[:, :2] <= [1 / 14 + 1e-12, 1 / 10 + 1e-12]).all()
-    one = scene.intersect(origins[5], directions[5])
-    assert one["triangle_id"].shape == () and one["barycentric"].shape == (3,)
-    for name in one:
-        np.testing.assert_array_equal(one[name], hits[name][5], err_msg=name)
-    assert scene.occluded(origins[5], directions[5]).shape == ()
+    for o, d in ((origins[5], directions[5]), (origins[5].tolist(), tuple(directions[5]))):
+        one = scene.intersect(o, d)
+        assert one["triangle_id"].shape == () and one["barycentric"].shape == (3,)
+        for name in one:
+            np.testing.assert_array_equal(one[name], hits[name][5], err_msg=name)
+        assert scene.occluded(o, d).shape == ()
+    big = vrc.Scene(mesh.scale(8, inplace=False))
+    whole = np.round(origins * 8).astype(int), np.round(directions * 8).astype(int)  # the same rays as floats
+    ints, floats = big.intersect(*whole), big.intersect(*(a.astype(float) for a in whole))
+    assert (ints["triangle_id"] >= 0).mean() > 0.2
+    for name in ints:
+        np.testing.assert_array_equal(ints[name], floats[name], err_msg=name)
 
 
 def test_unusual_calls_go_the_general_way(sphere):
     """Rays the quick way cannot take as they are (directions shifted in the core, origins
-    beyond its bound, bad values, float32 arrays) are left to the general way, which casts
-    them or raises."""
+    beyond its bound, bad values) are left to the general way, which casts them or raises."""
     origins, directions = random_rays(500, seed=9)
     hits = sphere.intersect(origins, directions)
     short = directions * 2.0**-40
@@ -152,6 +158,10 @@ def test_unusual_calls_go_the_general_way(sphere):
         sphere.occluded(origins, zero)
     with pytest.raises(ValueError, match="tmin must be >= 0"):
         sphere.intersect(origins, directions, tmin=-1.0)
+    with pytest.raises(TypeError, match="origins must be numeric"):
+        sphere.intersect(origins > 0, directions)
+    with pytest.raises(ValueError, match="inhomogeneous"):
+        sphere.occluded([[0, 0, 3], [0, 0]], [0, 0, -1])
 
 
 @pytest.mark.parametrize("accel", ["bvh", "none"])

@@ -731,30 +731,25 @@ class Scene:
         names: list[str] | None,
     ) -> tuple[np.ndarray | None, ...] | None:
         """Intersect's arrays ``names`` (None: occluded's answers), by the core's quick way,
-        for the usual call: origins and directions float64 arrays of one shape ``(n, 3)``
-        or ``(3,)``, bounds given as numbers, a scene of one piece cast unscaled. The arrays
+        for the usual call: numeric origins and directions of one shape ``(n, 3)`` or
+        ``(3,)``, bounds given as numbers, a scene of one piece cast unscaled. The arrays
         come in _QUICK_ARRAYS's order (None where not asked for; occluded's first). None
         when the general way must run (_core.quick_rays tells the rest), which then raises
         what is wrong. A call of a few rays spent most of its time in the general way."""
+        if self._scale.shift or self._mesh.composite_ids is not None or not {type(tmin), type(tmax)} <= {float, int}:
+            return None
+        # (np.asarray raises here what it would raise in the general way)
+        o = origins if type(origins) is np.ndarray else np.asarray(origins)
+        d = directions if type(directions) is np.ndarray else np.asarray(directions)
         if not (
-            type(origins) is np.ndarray
-            and type(directions) is np.ndarray
-            and origins.dtype == np.float64
-            and directions.dtype == np.float64
-            and origins.shape == directions.shape
-            and origins.shape[-1:] == (3,)
-            and origins.ndim <= 2
-            and type(tmin) in (float, int)
-            and type(tmax) in (float, int)
-            and not self._scale.shift
-            and self._mesh.composite_ids is None
+            o.shape == d.shape and o.shape[-1:] == (3,) and o.ndim <= 2 and {o.dtype.kind, d.dtype.kind} <= set("fiu")
         ):
             return None
         mesh = self._mesh
         quick = _core.quick_rays(
             self._core,
-            origins.reshape(-1, 3),
-            directions.reshape(-1, 3),
+            np.ascontiguousarray(o.reshape(-1, 3), dtype=np.float64),
+            np.ascontiguousarray(d.reshape(-1, 3), dtype=np.float64),
             float(tmin),
             float(tmax),
             self._scale.reach,
@@ -765,7 +760,7 @@ class Scene:
             bool(backface_culling),
             _threads(threads),
         )
-        if quick is None or origins.ndim == 2:
+        if quick is None or o.ndim == 2:
             return quick
         return tuple(None if a is None else a.reshape(a.shape[1:]) for a in quick)  # (one ray: shapes () and (3,))
 
