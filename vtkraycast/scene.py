@@ -732,15 +732,20 @@ class Scene:
     ) -> tuple[np.ndarray | None, ...] | None:
         """Intersect's arrays ``names`` (None: occluded's answers), by the core's quick way,
         for the usual call: numeric origins and directions of one shape ``(n, 3)`` or
-        ``(3,)``, bounds given as numbers, a scene of one piece cast unscaled. The arrays
-        come in _QUICK_ARRAYS's order (None where not asked for; occluded's first). None
-        when the general way must run (_core.quick_rays tells the rest), which then raises
-        what is wrong. A call of a few rays spent most of its time in the general way."""
+        ``(3,)`` (or one of them ``(3,)``), bounds given as numbers, a scene of one piece
+        cast unscaled. The arrays come in _QUICK_ARRAYS's order (None where not asked for;
+        occluded's first). None when the general way must run (_core.quick_rays tells the
+        rest), which then raises what is wrong. A call of a few rays spent most of its time
+        in the general way."""
         if self._scale.shift or self._mesh.composite_ids is not None or not {type(tmin), type(tmax)} <= {float, int}:
             return None
         # (np.asarray raises here what it would raise in the general way)
         o = origins if type(origins) is np.ndarray else np.asarray(origins)
         d = directions if type(directions) is np.ndarray else np.asarray(directions)
+        if o.shape == (3,) and d.ndim == 2:  # (one origin, a batch of directions: a sensor's)
+            o = np.broadcast_to(o, d.shape)
+        elif d.shape == (3,) and o.ndim == 2:
+            d = np.broadcast_to(d, o.shape)
         if not (
             o.shape == d.shape and o.shape[-1:] == (3,) and o.ndim <= 2 and {o.dtype.kind, d.dtype.kind} <= set("fiu")
         ):
