@@ -742,9 +742,9 @@ class Scene:
         # (np.asarray raises here what it would raise in the general way)
         o = origins if type(origins) is np.ndarray else np.asarray(origins)
         d = directions if type(directions) is np.ndarray else np.asarray(directions)
-        if o.shape == (3,) and d.ndim == 2:  # (one origin, a batch of directions: a sensor's)
+        if o.shape == (3,) and d.ndim == 2 and d.shape[1] == 3:  # (one origin, a batch of directions: a sensor's)
             o = np.broadcast_to(o, d.shape)
-        elif d.shape == (3,) and o.ndim == 2:
+        elif d.shape == (3,) and o.ndim == 2 and o.shape[1] == 3:
             d = np.broadcast_to(d, o.shape)
         if not (
             o.shape == d.shape and o.shape[-1:] == (3,) and o.ndim <= 2 and {o.dtype.kind, d.dtype.kind} <= set("fiu")
