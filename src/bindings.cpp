@@ -266,21 +266,27 @@ vrc::CameraRays camera_rays(const vrc::Scene& scene, const Request& q) {
     return rays;
 }
 
+/// Casts `rays` into `out` with the GIL released, polling Ctrl-C and `progress`. Returns
+/// False if aborted.
 template <class Real, class Rays>
-bool run(const vrc::Scene& scene, const Rays& rays, const Request& q) {
-    const vrc::Outputs<Real> out = outputs<Real>(scene, q, rays.size());
-    const Strategy s = parse_strategy(q.strategy);
-    const bool brute_force = parse_accel(q.accel);
-    const unsigned n_threads = resolve_threads(q.threads);
-    PythonPoll poll{q.progress};
+bool cast_into(const vrc::Scene& scene, const Rays& rays, const vrc::Outputs<Real>& out, Strategy strategy,
+               bool brute_force, const vrc::CastContext& context, unsigned threads,
+               const std::optional<nb::callable>& progress) {
+    PythonPoll poll{progress};
     bool completed;
     {
         nb::gil_scoped_release release;
-        completed = dispatch<Real>(scene, rays, s, brute_force, out, vrc::CastContext{q.backface_culling, q.any_hit},
-                                   n_threads, std::ref(poll));
+        completed = dispatch<Real>(scene, rays, strategy, brute_force, out, context, threads, std::ref(poll));
     }
     if (poll.raised) throw nb::python_error();
     return completed;
+}
+
+template <class Real, class Rays>
+bool run(const vrc::Scene& scene, const Rays& rays, const Request& q) {
+    return cast_into<Real>(scene, rays, outputs<Real>(scene, q, rays.size()), parse_strategy(q.strategy),
+                           parse_accel(q.accel), vrc::CastContext{q.backface_culling, q.any_hit},
+                           resolve_threads(q.threads), q.progress);
 }
 
 template <class Real>
@@ -303,7 +309,7 @@ bool cast_as(const vrc::Scene& scene, const Request& q) {
 
 /// Scene.intersect's arrays (or occluded's answers, with `any_hit`) for rays (n, 3) that
 /// need none of what the general way (scene.py) does beyond a cast: finite, with nonzero
-/// directions whose largest components lie in [2^-17, 2^16) (no shift of t), origins
+/// directions whose largest components lie in [`longest[0]`, `longest[1]`) (no shift of t), origins
 /// within `limit` of the scene's centre as scene.py's Scale.check_origins bounds them
 /// (|component| + `reach`), a scene cast unscaled (no shift of positions). The outputs
 /// are made here: a call of a few rays spent most of its time in the general way's
@@ -311,8 +317,8 @@ bool cast_as(const vrc::Scene& scene, const Request& q) {
 /// normal (in that order, as the returned tuple's items; None where not asked for). None
 /// when a condition fails; the general way then casts, or raises what is wrong.
 nb::object quick_rays(const vrc::Scene& scene, Points origins, Points directions, double tmin, double tmax, double reach,
-                      double limit, std::optional<CellMap> cell_ids, unsigned wanted, bool any_hit, bool culling,
-                      int threads) {
+                      double limit, std::array<double, 2> longest, std::optional<CellMap> cell_ids, unsigned wanted,
+                      bool any_hit, bool culling, int threads) {
     const std::size_t n = origins.shape(0);
     if (n == 0 || directions.shape(0) != n || !scene.has_bvh() || !(tmin >= 0 && tmin <= tmax)) return nb::none();
     if (cell_ids && cell_ids->shape(0) != scene.n_triangles()) return nb::none();
@@ -323,7 +329,7 @@ nb::object quick_rays(const vrc::Scene& scene, Points origins, Points directions
         e = vrc::ray_extent(origins.data(), directions.data(), n, n_threads);
     }
     if (!e.finite || !e.nonzero || !(std::max(-e.origin_min, e.origin_max) + reach <= limit) ||
-        !(e.longest_min >= 0x1p-17 && e.longest_max < 0x1p16))
+        !(e.longest_min >= longest[0] && e.longest_max < longest[1]))
         return nb::none();
     vrc::Outputs<double> out;
     out.cells_are_triangles = !cell_ids;
@@ -347,13 +353,8 @@ nb::object quick_rays(const vrc::Scene& scene, Points origins, Points directions
         make(4, out.position, 3);
         make(5, out.normal, 3);
     }
-    PythonPoll poll;
-    {
-        nb::gil_scoped_release release;
-        dispatch<double>(scene, vrc::ArrayRays(origins.data(), directions.data(), n, tmin, tmax), Strategy::Auto, false, out,
-                         vrc::CastContext{culling, any_hit}, n_threads, std::ref(poll));
-    }
-    if (poll.raised) throw nb::python_error();
+    cast_into<double>(scene, vrc::ArrayRays(origins.data(), directions.data(), n, tmin, tmax), out, Strategy::Auto, false,
+                      vrc::CastContext{culling, any_hit}, n_threads, std::nullopt);
     return nb::make_tuple(arrays[0], arrays[1], arrays[2], arrays[3], arrays[4], arrays[5]);
 }
 
@@ -618,7 +619,7 @@ VRC_NB_MODULE(VRC_MODULE, m) {
         "Whether this CPU runs the AVX2 build of the core (AVX2 and FMA).");
     bind_compositing(m);
     m.def("quick_rays", &quick_rays, "scene"_a, "origins"_a, "directions"_a, "tmin"_a, "tmax"_a, "reach"_a, "limit"_a,
-          "cell_ids"_a.none(), "wanted"_a, "any_hit"_a, "culling"_a, "threads"_a,
+          "longest"_a, "cell_ids"_a.none(), "wanted"_a, "any_hit"_a, "culling"_a, "threads"_a,
           "(triangle_id, cell_id, t, barycentric, position, normal), those not wanted None, or with any_hit "
           "(valid, None, ...), of the usual call of Scene.intersect or occluded; None when it needs the general way "
           "(see scene.py).");

@@ -45,10 +45,7 @@ class BufferPool:
         Small casts' arrays (under SMALL bytes in all) are new and not kept: looking for
         them cost a small batch of rays more than making them, and keeping them would push
         an image's arrays out of the pool."""
-        size = 0
-        for dtype, shape in layouts.values():
-            size += dtype.itemsize * math.prod(shape)
-        if size < SMALL:
+        if sum(dtype.itemsize * math.prod(shape) for dtype, shape in layouts.values()) < SMALL:
             return {name: np.empty(shape, dtype) for name, (dtype, shape) in layouts.items()}
         out = {}
         with self._lock:

@@ -25,8 +25,9 @@ SAFE = 16
 #: within the precision's range (float32 tests multiply float32 differences:
 #: 2**(3 * 36 + 16) < 2**127).
 LIMIT = {np.float64: 300, np.float32: 36}
-#: Directions of largest components within [_SAFE_LOW, _SAFE_HIGH) are within 2**±SAFE.
-_SAFE_LOW, _SAFE_HIGH = math.ldexp(1.0, -SAFE - 1), math.ldexp(1.0, SAFE)
+#: Directions whose largest components lie within [SAFE_LONGEST[0], SAFE_LONGEST[1]) are
+#: left unscaled (within 2**±SAFE).
+SAFE_LONGEST = (math.ldexp(1.0, -SAFE - 1), math.ldexp(1.0, SAFE))
 
 
 def exponent(x: float) -> int:
@@ -91,7 +92,7 @@ def direction_shifts(
     or one for all when ``bounded`` (tmin, tmax are one pair for all rays), which then must
     not differ in length by more than 2**(2 SAFE). 0 when every direction is within
     2**±SAFE already. ``extent``: the least and greatest largest component, when known."""
-    if extent is not None and _SAFE_LOW <= extent[0] and extent[1] < _SAFE_HIGH:  # (the usual case, at once)
+    if extent is not None and SAFE_LONGEST[0] <= extent[0] and extent[1] < SAFE_LONGEST[1]:  # (the usual case, at once)
         return 0
     if len(directions) == 0:
         return 0

@@ -27,7 +27,7 @@ from .fields import (
 )
 from .image import fill_image, set_arrays
 from .image_pool import ImagePool
-from .magnitudes import LIMIT, direction_shifts, scene_scale, shift_lengths
+from .magnitudes import LIMIT, SAFE_LONGEST, direction_shifts, scene_scale, shift_lengths
 from .mesh import PreparedMesh, prepare_mesh
 from .parallel import Workspace, cast_on_node, communicator, composite, default_threads, node_frames, triangle_keys
 from .sensors import Lidar, Panorama
@@ -716,8 +716,6 @@ class Scene:
         buffers, shape = self._cast_rays(
             origins, directions, [RAY_ARRAYS[name] for name in names], tmin, tmax, backface_culling, options
         )
-        if len(shape) == 1:  # (rows already)
-            return {name: buffers[RAY_ARRAYS[name]] for name in names}
         return {name: _batched(buffers[RAY_ARRAYS[name]], shape) for name in names}
 
     def _quick_rays(
@@ -759,6 +757,7 @@ class Scene:
             float(tmax),
             self._scale.reach,
             _ORIGIN_LIMIT,
+            SAFE_LONGEST,
             None if mesh.cells_are_triangles else mesh.cell_ids,
             0 if names is None else sum(1 << _QUICK_ARRAYS.index(name) for name in names),
             names is None,
