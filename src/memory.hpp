@@ -37,6 +37,15 @@ namespace vrc {
     for (std::uintptr_t line = first; line <= last; line += 64) prefetch_line(reinterpret_cast<const void*>(line));
 }
 
+/// prefetch_range for 1 to 128 bytes without a loop, whose count of lines a branch would
+/// follow: they span at most three lines, and when three, the middle byte lies in the
+/// middle one. (Two requests may ask for one line.)
+[[gnu::always_inline]] inline void prefetch_short(const char* p, std::size_t bytes) {
+    prefetch_line(p);
+    prefetch_line(p + (bytes - 1) / 2);
+    prefetch_line(p + bytes - 1);
+}
+
 /// Asks for transparent huge pages over a buffer of 4 MiB or more (its whole 4 KiB pages),
 /// before its pages are first touched. Linux only; elsewhere a no-op.
 inline void advise_huge(void* data, std::size_t bytes) {

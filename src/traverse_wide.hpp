@@ -82,7 +82,9 @@ class FloatLanes {
 
     /// Follows the far end of the search, `bound`: boxes beyond it are not entered.
     void set_bound(double bound) {
-        const float up = std::max(round_up(bound), bound > 0 ? kTinyBound : 0.0f);  // (higher still: no subnormal)
+        // (rounded up by a product, not round_up's branches: a bound one float step looser
+        // than it need be only widens the test, which the limit below widens far more)
+        const float up = std::max(static_cast<float>(bound * (1 + 0x1p-23)), bound > 0 ? kTinyBound : 0.0f);  // (no subnormal)
         tmax_ = up;
         // Entry distances are lower bounds of the exact ones up to their four roundings
         // (2^-21): a box whose entry lies beyond this may be passed over.
@@ -228,9 +230,10 @@ class WideSearch {
         int nearest;
         if (__builtin_popcount(mask) <= 2) {  // (most nodes: one lane or two entered)
             const int c0 = __builtin_ctz(mask), c1 = 31 - __builtin_clz(mask);
-            const bool second = enter[c1] < enter[c0];
-            nearest = second ? c1 : c0;
-            const int other = second ? c0 : c1;  // (one lane: a slot written, not kept)
+            // (chosen by masks, not branches: which of the two is nearer follows no pattern)
+            const int swap = (c0 ^ c1) & -int(enter[c1] < enter[c0]);
+            nearest = c0 ^ swap;
+            const int other = c1 ^ swap;  // (one lane: a slot written, not kept)
             stack_child_[top_] = node.child[other], stack_count_[top_] = node.count[other], stack_enter_[top_] = enter[other];
             top_ += std::size_t(c0 != c1);
             prefetch_child(node, other);
@@ -331,7 +334,8 @@ class WideSearch {
         // (addresses as integers: the one not chosen may lie outside its array)
         const uintptr_t as_node = reinterpret_cast<uintptr_t>(scene_.wide.data()) + sizeof(WideNode) * child;
         const uintptr_t as_leaf = reinterpret_cast<uintptr_t>(scene_.leaf_bytes.data()) + 4 * std::size_t(child);
-        prefetch_block(reinterpret_cast<const char*>(node.count[c] == 0 ? as_node : as_leaf));
+        const uintptr_t leaf = -uintptr_t(node.count[c] != 0);  // all ones: a leaf
+        prefetch_block(reinterpret_cast<const char*>(as_node ^ ((as_node ^ as_leaf) & leaf)));
     }
 
     /// Asks memory for a wide node or a leaf's block at `p` (four lines hold either).
@@ -392,7 +396,7 @@ class WideSearch {
     [[gnu::always_inline]] void prefetch_indices(uint32_t count) const {
         // (an address as an integer: past the array where the hint is wrong)
         const uintptr_t indices = reinterpret_cast<uintptr_t>(scene_.triangles.data()) + 12 * std::size_t(leaf_first_hint(count));
-        prefetch_range(reinterpret_cast<const char*>(indices), 12 * std::size_t(leaf_size(count)));
+        prefetch_short(reinterpret_cast<const char*>(indices), 12 * std::size_t(leaf_size(count)));
     }
 
     /// The leaf's triangles that may meet the ray, as bits: those the filter leaves, or
@@ -414,8 +418,10 @@ class WideSearch {
         // (a closest hit's store reads its input triangle index first: a scattered read,
         // which in a scene beyond the L2 cache would wait as the search ends; staged
         // searches' stores wait a round of turns for it instead, DeferredStore)
+        // (asked for whether or not a triangle is left: a branch on it would be mispredicted
+        // often, and the leaf's indices mostly share a line)
         if constexpr (kPolicy == HitPolicy::closest && !kStaged)
-            if (m) prefetch_line(scene_.prim_ids.data() + first + __builtin_ctz(m));
+            prefetch_line(reinterpret_cast<const char*>(scene_.prim_ids.data()) + 4 * (std::size_t(first) + __builtin_ctz(m | 0x100)));
         for (; m; m &= m - 1) {
             const uint32_t k = first + __builtin_ctz(m);
             if constexpr (kPolicy == HitPolicy::all) {
