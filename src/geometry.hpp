@@ -1,7 +1,6 @@
 // Small value types shared by the builder, the traversal and the kernels.
 #pragma once
 
-#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -168,14 +167,12 @@ struct Ray {
 /// triangles' winding, and the shear that takes the direction to (0, 0, 1/sz).
 struct Shear {
     explicit Shear(const Ray& ray) {
-        // (the axes chosen by selects, not branches: a random ray's largest axis and its
-        // sign follow no pattern a predictor learns)
-        const double ax = std::fabs(ray.dir[0]), ay = std::fabs(ray.dir[1]), az = std::fabs(ray.dir[2]);
-        kz = az > std::max(ax, ay) ? 2 : int(ay > ax);  // the first of the largest
-        const int next = kz == 2 ? 0 : kz + 1, after = next == 2 ? 0 : next + 1;
-        const int flip = -int(ray.dir[kz] < 0);  // all ones: kx and ky swapped
-        kx = next ^ ((next ^ after) & flip);
-        ky = after ^ ((next ^ after) & flip);
+        kz = 0;
+        for (int k = 1; k < 3; ++k)
+            if (std::fabs(ray.dir[k]) > std::fabs(ray.dir[kz])) kz = k;
+        kx = (kz + 1) % 3;
+        ky = (kx + 1) % 3;
+        if (ray.dir[kz] < 0) std::swap(kx, ky);
         sx = ray.dir[kx] / ray.dir[kz];
         sy = ray.dir[ky] / ray.dir[kz];
         sz = 1.0 / ray.dir[kz];
