@@ -117,21 +117,25 @@ bool render(const Scene& scene, const Rays& rays, const Outputs<Real>& out, cons
 
     // Camera rays go a tile at a time (traverse_tile.hpp), through the BVH or, on a flat
     // scene, through the triangles binned to the tile (bin_triangles.hpp); such tiles store
-    // their pixels row by row, in the outputs' order: streaming stores serve them when the
-    // outputs outgrow the caches (smaller ones are best left there for what reads them next).
+    // their pixels row by row, in the outputs' order, as do arrays' rays traced one by one:
+    // streaming stores serve them when the outputs outgrow the caches (smaller ones are
+    // best left there for what reads them next). Written through the cache, they would
+    // also push a scene's nodes and triangles out of the L2 cache, where a scene of 20 k
+    // triangles fits, leaving its rays to wait for them.
     constexpr bool kTiles = std::is_same_v<Rays, CameraRays> && !kBruteForce;
     bool camera_tiles = false;
     if constexpr (kTiles)
         camera_tiles = CameraCast::fits(rays.spec()) && CameraCast::fits(scene) && CameraCast::pays(scene, rays);
+    const bool interleave = !kBruteForce && scene.ray_bytes() >= kInterleavedBytes;
+    const bool in_order = camera_tiles || (std::is_same_v<Rays, ArrayRays> && !interleave);
     constexpr std::size_t kStreamedBytes = std::size_t(16) << 20;
-    const OutputWriter<Real> store(scene, out, camera_tiles && rays.size() * out.bytes_per_ray() >= kStreamedBytes);
+    const OutputWriter<Real> store(scene, out, in_order && rays.size() * out.bytes_per_ray() >= kStreamedBytes);
     auto tile_done = [&] {
         if (done.fetch_add(1) + 1 == n_tiles) {
             std::lock_guard<std::mutex> lock(mutex);
             finished.notify_all();
         }
     };
-    const bool interleave = !kBruteForce && scene.ray_bytes() >= kInterleavedBytes;
     // `by_ray` (a worker's): whether a tile of coherent rays goes one ray after another or
     // several in flight (incoherent ones always go several in flight).
     auto trace_rays = [&](std::size_t tile, CostChooser& by_ray, InFlightChooser& in_flight) {

@@ -85,6 +85,34 @@ def test_against_open3d_cast_rays(sphere):
     assert np.mean(sphere.occluded(origins, directions, tmax=0.6) == occluded) > 0.999
 
 
+def test_a_large_batch_answers_as_small_ones_and_open3d(sphere):
+    # 200 k rays with every array are 19 MB of outputs: past 16 MB they are written by
+    # streaming stores, small batches through the cache.
+    o3d = pytest.importorskip("open3d")
+    origins, directions = random_rays(200_000, seed=3)
+    names = ["triangle_id", "cell_id", "t", "barycentric", "position", "normal"]
+    large = sphere.intersect(origins, directions, arrays=names)
+    for first in range(0, 200_000, 40_000):
+        part = slice(first, first + 40_000)
+        small = sphere.intersect(origins[part], directions[part], arrays=names)
+        for name in names:
+            np.testing.assert_array_equal(large[name][part], small[name], err_msg=name)
+    peer = o3d.t.geometry.RaycastingScene()
+    peer.add_triangles(
+        o3d.core.Tensor(sphere.prepared.points.astype(np.float32)),
+        o3d.core.Tensor(sphere.prepared.triangles.astype(np.uint32)),
+    )
+    theirs = peer.cast_rays(o3d.core.Tensor(np.hstack((origins, directions)).astype(np.float32)))
+    ids = theirs["primitive_ids"].numpy().astype(np.int64)
+    ids[ids == np.iinfo(np.uint32).max] = -1
+    assert np.mean(large["triangle_id"] == ids) > 0.999
+    hit = large["triangle_id"] >= 0
+    np.testing.assert_allclose(
+        large["position"][hit], origins[hit] + large["t"][hit, None] * directions[hit], rtol=0, atol=1e-12
+    )
+    assert (large["cell_id"][~hit] == -1).all() and np.isnan(large["barycentric"][~hit]).all()
+
+
 def test_the_usual_call_answers_as_the_general_way():
     """Calls with float64 arrays (n, 3) or (3,) go the core's quick way (_core.quick_rays:
     it makes the outputs itself); their answers equal those of the general way (taken by
