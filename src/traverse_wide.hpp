@@ -417,9 +417,9 @@ class WideSearch {
         const uint32_t first = scene_.leaf(index).first;
         // (a closest hit's store reads its input triangle index first: a scattered read,
         // which in a scene beyond the L2 cache would wait as the search ends; staged
-        // searches' stores wait a round of turns for it instead, DeferredStore)
-        // (asked for whether or not a triangle is left: a branch on it would be mispredicted
-        // often, and the leaf's indices mostly share a line)
+        // searches' stores wait a round of turns for it instead, DeferredStore; asked for
+        // whether or not the filter left a triangle: a branch on that would often be
+        // mispredicted, and a leaf's input indices mostly share a line)
         if constexpr (kPolicy == HitPolicy::closest && !kStaged)
             prefetch_line(reinterpret_cast<const char*>(scene_.prim_ids.data()) + 4 * (std::size_t(first) + __builtin_ctz(m | 0x100)));
         for (; m; m &= m - 1) {
