@@ -160,12 +160,12 @@ class OutputWriter {
         if (out_.returns_only && out_.depth) return fill(out_.depth + k, 1, kNaN);
         if (out_.triangle_id) fill(out_.triangle_id + k, 1, int64_t(-1));
         if (out_.cell_id) fill(out_.cell_id + k, 1, int64_t(-1));
-        if (out_.composite_index) std::fill_n(out_.composite_index + k, n, int64_t(-1));
-        if (out_.valid) std::fill_n(out_.valid + k, n, uint8_t(0));
+        if (out_.composite_index) fill(out_.composite_index + k, 1, int64_t(-1));
+        if (out_.valid) fill(out_.valid + k, 1, uint8_t(0));
         if (out_.depth) fill(out_.depth + k, 1, kNaN);
         if (out_.barycentric) fill(out_.barycentric + 3 * k, 3, kNaN);
-        if (out_.position) std::fill_n(out_.position + 3 * k, 3 * n, kNaN);
-        if (out_.normal) std::fill_n(out_.normal + 3 * k, 3 * n, kNaN);
+        if (out_.position) fill(out_.position + 3 * k, 3, kNaN);
+        if (out_.normal) fill(out_.normal + 3 * k, 3, kNaN);
         for (const Field& f : out_.fields)
             with_type(f.dtype, [&](auto zero) {
                 using T = decltype(zero);
