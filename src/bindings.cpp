@@ -307,7 +307,8 @@ bool cast_as(const vrc::Scene& scene, const Request& q) {
     return run<Real>(scene, vrc::ArrayRays(q.origins->data(), q.directions->data(), q.origins->shape(0), q.tmin, q.tmax), q);
 }
 
-/// Scene.intersect's arrays (or occluded's answers, with `any_hit`) for rays (n, 3) that
+/// Scene.intersect's arrays (or occluded's answers, with `any_hit`) for rays (n, 3) (or one
+/// origin row against n directions) that
 /// need none of what the general way (scene.py) does beyond a cast: finite, with nonzero
 /// directions whose largest components lie in [`longest[0]`, `longest[1]`) (no shift of t), origins
 /// within `limit` of the scene's centre as scene.py's Scale.check_origins bounds them
@@ -319,14 +320,17 @@ bool cast_as(const vrc::Scene& scene, const Request& q) {
 nb::object quick_rays(const vrc::Scene& scene, Points origins, Points directions, double tmin, double tmax, double reach,
                       double limit, std::array<double, 2> longest, std::optional<CellMap> cell_ids, unsigned wanted,
                       bool any_hit, bool culling, int threads) {
-    const std::size_t n = origins.shape(0);
-    if (n == 0 || directions.shape(0) != n || !scene.has_bvh() || !(tmin >= 0 && tmin <= tmax)) return nb::none();
+    // (one origin row against many directions, a sensor's rays, is read as it is, not copied)
+    const std::size_t n = directions.shape(0);
+    const bool one_origin = origins.shape(0) == 1;
+    if (n == 0 || !(origins.shape(0) == n || one_origin) || !scene.has_bvh() || !(tmin >= 0 && tmin <= tmax))
+        return nb::none();
     if (cell_ids && cell_ids->shape(0) != scene.n_triangles()) return nb::none();
     const unsigned n_threads = resolve_threads(threads);
     vrc::RayExtent e;
     {
         nb::gil_scoped_release release;
-        e = vrc::ray_extent(origins.data(), directions.data(), n, n_threads);
+        e = vrc::ray_extent(origins.data(), directions.data(), n, n_threads, one_origin);
     }
     if (!e.finite || !e.nonzero || !(std::max(-e.origin_min, e.origin_max) + reach <= limit) ||
         !(e.longest_min >= longest[0] && e.longest_max < longest[1]))
@@ -353,7 +357,7 @@ nb::object quick_rays(const vrc::Scene& scene, Points origins, Points directions
         make(4, out.position, 3);
         make(5, out.normal, 3);
     }
-    cast_into<double>(scene, vrc::ArrayRays(origins.data(), directions.data(), n, tmin, tmax), out, Strategy::Auto, false,
+    cast_into<double>(scene, vrc::ArrayRays(origins.data(), directions.data(), n, tmin, tmax, one_origin), out, Strategy::Auto, false,
                       vrc::CastContext{culling, any_hit}, n_threads, std::nullopt);
     return nb::make_tuple(arrays[0], arrays[1], arrays[2], arrays[3], arrays[4], arrays[5]);
 }

@@ -28,15 +28,18 @@ struct RayExtent {
     }
 };
 
-/// The extent of rays 0 .. n - 1 (origins and directions (n, 3), row-major).
-inline RayExtent ray_extent(const double* origins, const double* directions, std::size_t n, unsigned threads) {
+/// The extent of rays 0 .. n - 1 (origins and directions (n, 3), row-major; with
+/// `one_origin`, a single origin row for all).
+inline RayExtent ray_extent(const double* origins, const double* directions, std::size_t n, unsigned threads,
+                            bool one_origin = false) {
+    const std::size_t origin_stride = one_origin ? 0 : 3;
     const unsigned parts = std::max(1u, std::min<unsigned>(threads, unsigned(n / 65536 + 1)));
     std::vector<RayExtent> part(parts);
     auto work = [&](unsigned p) {
         RayExtent e;
         double finite_sum = 0;  // (inf or NaN anywhere makes the sum NaN: one test at the end)
         for (std::size_t i = n * p / parts, end = n * (p + 1) / parts; i < end; ++i) {
-            const double* o = origins + 3 * i;
+            const double* o = origins + origin_stride * i;
             const double* d = directions + 3 * i;
             double longest = 0;
             for (int k = 0; k < 3; ++k) {

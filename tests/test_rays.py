@@ -155,10 +155,14 @@ def test_the_usual_call_answers_as_the_general_way():
             np.testing.assert_array_equal(one[name], hits[name][5], err_msg=name)
         assert scene.occluded(o, d).shape == ()
     for o, d in ((origins[7], directions), (origins, directions[7])):  # one origin or direction for all
-        broadcast = scene.intersect(o, d)
-        copied = scene.intersect(np.broadcast_to(o, (400, 3)).copy(), np.broadcast_to(d, (400, 3)).copy())
-        for name in copied:
-            np.testing.assert_array_equal(broadcast[name], copied[name], err_msg=name)
+        assert scene._quick_rays(o, d, 0.0, np.inf, None, False, every) is not None  # (one origin: read as one row)
+        broadcast = scene.intersect(o, d, arrays=every)
+        copied = np.broadcast_to(o, (400, 3)).copy(), np.broadcast_to(d, (400, 3)).copy()
+        general = scene.intersect(*copied, arrays=every, strategy="watertight")
+        assert 0.2 < (broadcast["triangle_id"] >= 0).mean() < 0.8
+        for name in every:
+            np.testing.assert_array_equal(broadcast[name], general[name], err_msg=name)
+        np.testing.assert_array_equal(scene.occluded(o, d), scene.occluded(*copied, strategy="watertight"))
     big = vrc.Scene(mesh.scale(8, inplace=False))
     whole = np.round(origins * 8).astype(int), np.round(directions * 8).astype(int)  # the same rays as floats
     ints, floats = big.intersect(*whole), big.intersect(*(a.astype(float) for a in whole))

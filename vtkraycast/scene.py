@@ -740,12 +740,15 @@ class Scene:
         # (np.asarray raises here what it would raise in the general way)
         o = origins if type(origins) is np.ndarray else np.asarray(origins)
         d = directions if type(directions) is np.ndarray else np.asarray(directions)
-        if o.shape == (3,) and d.ndim == 2 and d.shape[1] == 3:  # (one origin, a batch of directions: a sensor's)
-            o = np.broadcast_to(o, d.shape)
-        elif d.shape == (3,) and o.ndim == 2 and o.shape[1] == 3:
+        # (one origin against a batch of directions, a sensor's rays: the core reads one row)
+        one_origin = o.shape == (3,) and d.ndim == 2 and d.shape[1:] == (3,)
+        if d.shape == (3,) and o.ndim == 2 and o.shape[1] == 3:
             d = np.broadcast_to(d, o.shape)
         if not (
-            o.shape == d.shape and o.shape[-1:] == (3,) and o.ndim <= 2 and {o.dtype.kind, d.dtype.kind} <= set("fiu")
+            (one_origin or o.shape == d.shape)
+            and d.shape[-1:] == (3,)
+            and d.ndim <= 2
+            and {o.dtype.kind, d.dtype.kind} <= set("fiu")
         ):
             return None
         mesh = self._mesh
@@ -764,7 +767,7 @@ class Scene:
             bool(backface_culling),
             _threads(threads),
         )
-        if quick is None or o.ndim == 2:
+        if quick is None or d.ndim == 2:
             return quick
         return tuple(None if a is None else a.reshape(a.shape[1:]) for a in quick)  # (one ray: shapes () and (3,))
 
