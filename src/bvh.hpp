@@ -89,6 +89,9 @@ struct Scene {
     /// The leaves' coordinates are scaled by this power of two (0: the scene's coordinates
     /// lie beyond what the filter's bounds hold, and it lets every triangle through).
     double leaf_scale = 1;
+    /// Whether single rays ask for a leaf's point indices before its filter runs
+    /// (kPrefetchedIndexBytes; set with the wide nodes, not worked out at every leaf).
+    bool indices_prefetched = false;
     /// Boxes are stored relative to this point (the centre of the triangles' bounding box), so
     /// their single precision resolves the scene's own size, wherever it lies in the world.
     double anchor[3] = {0, 0, 0};

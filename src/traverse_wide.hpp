@@ -156,10 +156,6 @@ struct NoSink {
     void operator()(uint32_t, double, const Real*) const {}
 };
 
-/// Scenes whose single-ray data take this much memory or more (beyond an L1 cache) have a
-/// leaf's point indices asked for before its filter runs, when rays go one at a time.
-constexpr std::size_t kPrefetchedIndexBytes = std::size_t(256) << 10;
-
 /// Closest hit (or with HitPolicy::any, any hit) along a ray in [tmin, tmax] through the
 /// wide BVH, children visited nearest first, a node at a time (`step`), so that several
 /// rays' searches can take turns and their memory accesses overlap (trace_rays_interleaved). Ties go
@@ -384,7 +380,7 @@ class WideSearch {
             // (the leaf's filter runs before its point indices are read: time for them to
             // come from the L2 cache or beyond, where a scene's triangles lie when its
             // single-ray data outgrow the L1 cache)
-            if (scene_.ray_bytes() >= kPrefetchedIndexBytes) prefetch_indices(next.count);
+            if (scene_.indices_prefetched) prefetch_indices(next.count);
             return leaf(next.child, leaf_size(next.count)) ? After::stop : After::pop;
         }
     }

@@ -171,6 +171,7 @@ void build_wide(Scene& scene, unsigned threads) {
     for (unsigned w = 1; w < workers; ++w) helpers.emplace_back(fill, w);
     fill(0);
     for (std::thread& t : helpers) t.join();
+    scene.indices_prefetched = scene.ray_bytes() >= kPrefetchedIndexBytes;
 }
 
 }  // namespace vrc
