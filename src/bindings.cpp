@@ -307,14 +307,13 @@ bool cast_as(const vrc::Scene& scene, const Request& q) {
     return run<Real>(scene, vrc::ArrayRays(q.origins->data(), q.directions->data(), q.origins->shape(0), q.tmin, q.tmax), q);
 }
 
-/// Scene.intersect's arrays (or occluded's answers, with `any_hit`) for rays (n, 3) (or one
-/// origin row against n directions) that
-/// need none of what the general way (scene.py) does beyond a cast: finite, with nonzero
-/// directions whose largest components lie in [`longest[0]`, `longest[1]`) (no shift of t), origins
-/// within `limit` of the scene's centre as scene.py's Scale.check_origins bounds them
-/// (|component| + `reach`), a scene cast unscaled (no shift of positions). The outputs
-/// are made here: a call of a few rays spent most of its time in the general way's
-/// Python. `wanted`'s bits ask for triangle_id, cell_id, t, barycentric, position and
+/// Scene.intersect's arrays (or occluded's answers, with `any_hit`) for rays (n, 3), or one
+/// origin row against n directions, that need none of what the general way (scene.py) does
+/// beyond a cast: finite, with nonzero directions whose largest components lie in
+/// [`longest[0]`, `longest[1]`) (no shift of t), origins within `limit` of the scene's
+/// centre as scene.py's Scale.check_origins bounds them (|component| + `reach`), a scene
+/// cast unscaled (no shift of positions). The outputs are made here: a call of a few rays
+/// spent most of its time in the general way's Python. `wanted`'s bits ask for triangle_id, cell_id, t, barycentric, position and
 /// normal (in that order, as the returned tuple's items; None where not asked for). None
 /// when a condition fails; the general way then casts, or raises what is wrong.
 nb::object quick_rays(const vrc::Scene& scene, Points origins, Points directions, double tmin, double tmax, double reach,
@@ -357,8 +356,8 @@ nb::object quick_rays(const vrc::Scene& scene, Points origins, Points directions
         make(4, out.position, 3);
         make(5, out.normal, 3);
     }
-    cast_into<double>(scene, vrc::ArrayRays(origins.data(), directions.data(), n, tmin, tmax, one_origin), out, Strategy::Auto, false,
-                      vrc::CastContext{culling, any_hit}, n_threads, std::nullopt);
+    const vrc::ArrayRays rays(origins.data(), directions.data(), n, tmin, tmax, one_origin);
+    cast_into<double>(scene, rays, out, Strategy::Auto, false, vrc::CastContext{culling, any_hit}, n_threads, std::nullopt);
     return nb::make_tuple(arrays[0], arrays[1], arrays[2], arrays[3], arrays[4], arrays[5]);
 }
 

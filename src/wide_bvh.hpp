@@ -82,8 +82,8 @@ constexpr std::size_t kPrefetchedIndexBytes = std::size_t(256) << 10;
 /// Collapses the scene's binary BVH into eight-wide nodes (scene.wide, wide[0] the root),
 /// each node taking in the largest-area grandchildren until it holds eight children (the
 /// collapse of Wald, Benthin and Boulos, "Getting rid of packets", 2008), and sets the
-/// leaves' blocks (scene.leaf_bytes, leaf_scale, indices_prefetched). Leaves stay the binary BVH's.
-/// Empty when the scene has no BVH nodes. Its points must be in their final order. The
+/// leaves' blocks (scene.leaf_bytes, leaf_scale, indices_prefetched). Leaves stay the
+/// binary BVH's. Empty when the scene has no BVH nodes. Its points must be in their final order. The
 /// leaves' blocks are filled on up to `threads` threads.
 void build_wide(Scene& scene, unsigned threads);
 
