@@ -313,9 +313,10 @@ bool cast_as(const vrc::Scene& scene, const Request& q) {
 /// [`longest[0]`, `longest[1]`) (no shift of t), origins within `limit` of the scene's
 /// centre as scene.py's Scale.check_origins bounds them (|component| + `reach`), a scene
 /// cast unscaled (no shift of positions). The outputs are made here: a call of a few rays
-/// spent most of its time in the general way's Python. `wanted`'s bits ask for triangle_id, cell_id, t, barycentric, position and
-/// normal (in that order, as the returned tuple's items; None where not asked for). None
-/// when a condition fails; the general way then casts, or raises what is wrong.
+/// spent most of its time in the general way's Python. `wanted`'s bits ask for
+/// triangle_id, cell_id, t, barycentric, position and normal (in that order, as the
+/// returned tuple's items; None where not asked for). None when a condition fails; the
+/// general way then casts, or raises what is wrong.
 nb::object quick_rays(const vrc::Scene& scene, Points origins, Points directions, double tmin, double tmax, double reach,
                       double limit, std::array<double, 2> longest, std::optional<CellMap> cell_ids, unsigned wanted,
                       bool any_hit, bool culling, int threads) {
