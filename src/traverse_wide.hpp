@@ -200,6 +200,7 @@ class WideSearch {
         if constexpr (kStaged) {
             if (leaf_stage_ == 1) {  // the leaf's block and point indices are in cache: filter, ask for the candidates' points
                 leaf_candidates_ = candidates(leaf_.child, leaf_size(leaf_.count));
+                if (kPolicy == HitPolicy::any && hit_.found()) return false;
                 if (!leaf_candidates_) {
                     leaf_stage_ = 0;
                     return pop();
@@ -386,7 +387,10 @@ class WideSearch {
     }
 
     /// Tests the `count` triangles of leaf `index`; true when the search is over (any hit).
-    bool leaf(uint32_t index, uint32_t count) { return test_leaf(index, candidates(index, count)); }
+    bool leaf(uint32_t index, uint32_t count) {
+        const unsigned m = candidates(index, count);
+        return (kPolicy == HitPolicy::any && hit_.found()) || test_leaf(index, m);
+    }
 
     /// Asks memory for the point indices of the leaf whose lane's count is `count`.
     [[gnu::always_inline]] void prefetch_indices(uint32_t count) const {
@@ -396,13 +400,22 @@ class WideSearch {
     }
 
     /// The leaf's triangles that may meet the ray, as bits: those the filter leaves, or
-    /// (other kernels) all.
+    /// (other kernels) all. Any hit: a triangle the filter finds surely hit ends the search
+    /// here, its points never read (hit_ then holds it, its t and weights not worked out:
+    /// an any-hit query reads neither).
     unsigned candidates(uint32_t index, uint32_t count) {
         if (!tests_) tests_.emplace(scene_, ray_, context_);
-        if constexpr (kFiltered)
+        if constexpr (kFiltered && kPolicy == HitPolicy::any) {
+            const LeafBlock& block = scene_.leaf(index);
+            unsigned certain;
+            const unsigned m = tests_->filter.template candidates<true>(block, count, bound_, context_.cull_back_faces, &certain);
+            if (certain) hit_.prim = block.first + __builtin_ctz(certain);
+            return m;
+        } else if constexpr (kFiltered) {
             return tests_->filter.candidates(scene_.leaf(index), count, bound_);
-        else
+        } else {
             return (1u << count) - 1;
+        }
     }
 
     /// Tests the leaf's triangles whose bits `m` holds; true when the search is over (any hit).

@@ -57,9 +57,17 @@ class TriangleFilter {
     }
 
     /// Bits of the lanes among the first `n` of `block` that may meet the ray with
-    /// tmin <= t <= bound.
-    [[nodiscard, gnu::always_inline]] unsigned candidates(const LeafBlock& block, uint32_t n, double bound) const {
+    /// tmin <= t <= bound. With `certain` (kCertain), also the bits of those that surely
+    /// meet it there, facing the ray where `culling` asks: all three edge functions of one
+    /// sign, each beyond its error bound, and all three corners' depths within
+    /// [tmin, bound] by the margins that reject the others. The kernel would only confirm
+    /// such a hit (its edge signs are the exact ones, its t within 2^-9 of the exact one),
+    /// which is all an any-hit query asks.
+    template <bool kCertain = false>
+    [[nodiscard, gnu::always_inline]] unsigned candidates(const LeafBlock& block, uint32_t n, double bound,
+                                                          bool culling = false, unsigned* certain = nullptr) const {
         const unsigned all = (1u << n) - 1;
+        if constexpr (kCertain) *certain = 0;
         if (!usable_) return all;
         Lane8 x[3], y[3], s[3], z[3];
         const Lane8 step[3] = {lanes_set(block.step[axis_[0]]), lanes_set(block.step[axis_[1]]), lanes_set(block.step[axis_[2]])};
@@ -79,12 +87,15 @@ class TriangleFilter {
         // u: edge (c, b), v: (a, c), w: (b, a), as the kernel pairs them
         const int pairs[3][2] = {{2, 1}, {0, 2}, {1, 0}};
         Lane8 negative = lanes_set(0.0f), positive = negative;
+        unsigned all_negative = all, all_positive = all;  // (kCertain)
         for (const auto& pair : pairs) {
             const int i = pair[0], j = pair[1];
             const Lane8 edge = lanes_fmadd(x[i], y[j], lanes_neg(lanes_mul(y[i], x[j])));
             const Lane8 margin = lanes_fmadd(lanes_mul(rounding, s[i]), s[j], lanes_fmadd(delta, lanes_add(s[i], s[j]), delta2));
-            negative = lanes_or(negative, lanes_lt(edge, lanes_neg(margin)));
-            positive = lanes_or(positive, lanes_lt(margin, edge));
+            const Lane8 below = lanes_lt(edge, lanes_neg(margin)), above = lanes_lt(margin, edge);
+            negative = lanes_or(negative, below);
+            positive = lanes_or(positive, above);
+            if constexpr (kCertain) all_negative &= lanes_bits(below), all_positive &= lanes_bits(above);
         }
         // A hit's t is the average of the corners' depths weighted by its barycentric
         // coordinates: it lies between the least and the greatest.
@@ -92,10 +103,13 @@ class TriangleFilter {
         const Lane8 relative = lanes_set(0x1p-8f), slack = lanes_set(delta_ + 2 * block.error);
         // (tmin and the bound rounded to nearest: their relative error, 2^-24, vanishes in
         // the relative margin, which exceeds the kernel's 2^-9 by far more)
-        const Lane8 before = lanes_lt(lanes_add(far, lanes_fmadd(relative, lanes_abs(far), slack)), lanes_set(tmin_));
-        const Lane8 after = lanes_lt(lanes_set(static_cast<float>(bound * scale_)),
-                                     lanes_sub(near, lanes_fmadd(relative, lanes_abs(near), slack)));
+        const Lane8 far_most = lanes_add(far, lanes_fmadd(relative, lanes_abs(far), slack));
+        const Lane8 near_least = lanes_sub(near, lanes_fmadd(relative, lanes_abs(near), slack));
+        const Lane8 tmin = lanes_set(tmin_), last = lanes_set(static_cast<float>(bound * scale_));
+        const Lane8 before = lanes_lt(far_most, tmin), after = lanes_lt(last, near_least);
         const Lane8 rejected = lanes_or(lanes_and(negative, positive), lanes_or(before, after));
+        if constexpr (kCertain)
+            *certain = (all_positive | (culling ? 0u : all_negative)) & lanes_le(tmin, near_least) & lanes_le(far_most, last);
         return ~lanes_bits(rejected) & all;
     }
 

@@ -221,6 +221,29 @@ def test_occluded_from_inside_a_closed_mesh_is_always_true():
     assert not scene.occluded(np.zeros(3), directions, tmax=0.4).any()  # radius 0.5
 
 
+def test_occluded_just_inside_and_just_outside_its_range():
+    """occluded takes a hit the leaf filter finds certain without the exact test
+    (traverse_wide.hpp): never one a hair beyond tmin or tmax, nor a back face culled."""
+    scene = vrc.Scene(pv.Plane(i_size=2, j_size=2, i_resolution=30, j_resolution=30))
+    rng = np.random.default_rng(5)
+    origins = np.column_stack([rng.uniform(-0.9, 0.9, (2000, 2)), rng.uniform(0.2, 3, 2000)])
+    directions = rng.uniform(-0.3, 0.3, (2000, 3)) - [0, 0, 1]
+    t = scene.intersect(origins, directions)["t"]
+    origins, directions = origins[t < np.inf], directions[t < np.inf] * t[t < np.inf, None]  # every hit now at t = 1
+    assert len(origins) > 1000
+    assert np.abs(scene.intersect(origins, directions)["t"] - 1).max() < 1e-14
+    for tmin, tmax, hit in (
+        (0.0, 1 - 1e-9, False),
+        (0.0, 1 + 1e-9, True),
+        (1 - 1e-9, 5.0, True),
+        (1 + 1e-9, 5.0, False),
+    ):
+        np.testing.assert_array_equal(scene.occluded(origins, directions, tmin=tmin, tmax=tmax), hit)
+    assert scene.occluded(origins, directions, backface_culling=True).all()  # (the plane faces +z)
+    assert not scene.occluded(origins * [1, 1, -1], directions * [1, 1, -1], backface_culling=True).any()
+    assert scene.occluded(origins * [1, 1, -1], directions * [1, 1, -1]).all()
+
+
 def test_rays_through_a_scene_beyond_the_caches_match_every_triangle_tested():
     """Scenes this large trace several rays at a time, steps interleaved (render.hpp,
     trace_rays_interleaved); the answers are still the closest hits the kernel finds when
