@@ -8,6 +8,7 @@ ratios where separate runs minutes apart cannot resolve it.
     pip install --no-build-isolation --no-deps . --target /tmp/after -Cbuild-dir=/tmp/build-after
     python benchmarks/compare_builds.py /tmp/before /tmp/after [--rounds 60] [--threads 2]
         [--scene frog|channels|terrain|bumpy|small|sphere|ant] [--view framed|close|full|lidar|rays|occluded|crossings]
+        [--rays-from outside|inside|surface]
         [--flat] [--pixels 1024]
         [--arrays ids|geometry|default] [--cold]
 
@@ -24,7 +25,8 @@ default geometry (``geometry``: interpolate=False), the defaults with the mesh's
 (``default``), or the arrays named (``Depth,Elevation``). Builds are compared by the first
 array cast. ``--view lidar`` times ``Scene.scan`` of benchmarks/sensors.py's 64 x 2048
 lidar instead, comparing range images; ``--view rays`` times ``Scene.intersect`` (its
-default arrays) of benchmarks/rays.py's rays from outside (500,000; ``--rays``), comparing
+default arrays) of benchmarks/rays.py's rays from outside (500,000; ``--rays``; from inside or
+from the surface with ``--rays-from``), comparing
 triangle ids, ``--view occluded`` ``Scene.occluded`` of the same rays; ``--view crossings``
 times ``Scene.intersect_all`` of visibility.py's random rays (origins in the mesh's box,
 random directions; ``--rays``), comparing the crossings' t.
@@ -44,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 ARRAYS = {"ids": {"arrays": ["TriangleId"]}, "geometry": {"interpolate": False}, "default": {}}
+RAY_SETS = {"outside": "from outside", "inside": "from inside", "surface": "from the surface, tmin 1e-6"}
 
 
 def caster(build: str, args: argparse.Namespace, pipe) -> None:
@@ -73,7 +76,7 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
     if args.view in ("rays", "occluded"):
         import rays
 
-        origins, directions, _ = rays.ray_sets(scene, args.rays, np.random.default_rng(7))["from outside"]
+        origins, directions, tmin = rays.ray_sets(scene, args.rays, np.random.default_rng(7))[RAY_SETS[args.rays_from]]
     elif args.view == "crossings":
         rng = np.random.default_rng(0)
         points = scene.prepared.points
@@ -90,9 +93,9 @@ def caster(build: str, args: argparse.Namespace, pipe) -> None:
 
     def cast() -> np.ndarray:
         if args.view == "rays":
-            return scene.intersect(origins, directions, threads=args.threads)["triangle_id"]
+            return scene.intersect(origins, directions, tmin=tmin, threads=args.threads)["triangle_id"]
         if args.view == "occluded":
-            return scene.occluded(origins, directions, threads=args.threads)
+            return scene.occluded(origins, directions, tmin=tmin, threads=args.threads)
         if args.view == "crossings":
             return scene.intersect_all(origins, directions, threads=args.threads)["t"]
         if args.view == "lidar":
@@ -124,6 +127,9 @@ def main() -> None:
         default="framed",
     )
     parser.add_argument("--rays", type=int, default=500_000, help="rays of --view rays, occluded and crossings")
+    parser.add_argument(
+        "--rays-from", choices=list(RAY_SETS), default="outside", help="rays.py's set of --view rays, occluded"
+    )
     parser.add_argument("--flat", action="store_true", help="cast without a BVH, as vrc.cast does")
     parser.add_argument("--pixels", type=int, default=1024)
     parser.add_argument(
