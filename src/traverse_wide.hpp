@@ -224,6 +224,11 @@ class WideSearch {
         // and the nearest is gone on to at once. Every hit wanted, any order does; any hit,
         // too (a search stops at the first found, wherever it lies), but the order costs
         // little here.
+#if defined(__AVX2__)
+        // (the sorting network however many lanes were entered: a branch on their number,
+        // mostly one or two, was mispredicted about once a ray)
+        const int nearest = push_sorted(node, enter, mask);
+#else
         int nearest;
         if (__builtin_popcount(mask) <= 2) {  // (most nodes: one lane or two entered)
             const int c0 = __builtin_ctz(mask), c1 = 31 - __builtin_clz(mask);
@@ -237,6 +242,7 @@ class WideSearch {
         } else {
             nearest = push_sorted(node, enter, mask);
         }
+#endif
         const After after = take({node.child[nearest], node.count[nearest], enter[nearest]});
         return after == After::pop ? pop() : after == After::step;
     }
@@ -323,9 +329,10 @@ class WideSearch {
 
     /// Asks memory for what lane c of `node` leads to, a node or a leaf's block, chosen
     /// without a branch (whether a lane is a leaf follows no pattern the predictor learns).
-    /// Only the second of two entered lanes is asked for when pushed: rays that follow one
-    /// another through a scene beyond the caches, traced one after another, then wait less
-    /// for it, while the sorted pushes of three or more stay cheap for scenes in the caches.
+    /// The baseline build asks for the second of two entered lanes when it pushes it: rays
+    /// that follow one another through a scene beyond the caches, traced one after another,
+    /// then wait less for it, while the sorted pushes of three or more stay cheap for scenes
+    /// in the caches.
     [[gnu::always_inline]] void prefetch_child(const WideNode& node, int c) const {
         const uint32_t child = node.child[c];
         // (addresses as integers: the one not chosen may lie outside its array)
